@@ -1,0 +1,40 @@
+# Two commands do everything on a fresh Debian machine (Python 3.10+, no GPU):
+#   make demo   set up .venv and the system libraries, then run the demo
+#   make test   the same set-up, then the test suite
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SYSLIBS := libegl1 libopengl0 libgl1-mesa-dri libgomp1
+export MUJOCO_GL ?= egl
+
+.PHONY: demo test setup syslibs perf clean
+
+setup: syslibs $(STAMP)
+
+# Debian packages for offscreen EGL rendering (MuJoCo) and OpenMP (proxsuite); installed only when missing.
+syslibs:
+	@missing=""; for p in $(SYSLIBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" -eq 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
+	fi
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/bigcbf demo
+
+test: setup
+	$(PY) -m pytest -q -p no:cacheprovider
+
+perf: setup
+	$(VENV)/bin/bigcbf perf
+
+clean:
+	rm -rf $(VENV) *.egg-info

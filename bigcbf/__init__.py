@@ -1,0 +1,14 @@
+"""bigcbf: BIG-CBF navigation for a Mecanum robot in MuJoCo, with a digital twin.
+
+Layers (a lower layer never imports a higher one; see ../shared/DESIGN.md):
+cli > bench > episode > sim > {perception, control} > {params, types}.
+"""
+from pathlib import Path
+
+__version__ = "0.1.0"
+
+#: Repository root (assets/ and scenarios/ live here; the project is installed editable).
+ROOT = Path(__file__).resolve().parent.parent
+ASSETS = ROOT / "assets"
+SCENARIOS = ROOT / "scenarios"
+RENDERS = ROOT / "renders"
