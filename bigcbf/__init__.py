@@ -3,7 +3,11 @@
 Layers (a lower layer never imports a higher one; see ../shared/DESIGN.md):
 cli > bench > episode > sim > {perception, control} > {params, types}.
 """
+import os
 from pathlib import Path
+
+# Offscreen rendering without a display (must be set before mujoco is imported anywhere).
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.1.0"
 

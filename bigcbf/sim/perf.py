@@ -1,0 +1,35 @@
+"""Speed of the simulator: bare physics stepping and one LiDAR scan (figures for ``bigcbf perf``)."""
+from __future__ import annotations
+
+import time
+
+import mujoco
+import numpy as np
+
+from .scene import SCENE_XML, Cylinder, SceneSpec, Wall
+from .world import SimWorld
+
+
+def bench(quick: bool = False) -> dict:
+    m = mujoco.MjModel.from_xml_path(str(SCENE_XML))
+    d = mujoco.MjData(m)
+    d.ctrl[:] = (10.0, 12.0, 12.0, 10.0)
+    n = 2000 if quick else 10000
+    for _ in range(200):
+        mujoco.mj_step(m, d)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        mujoco.mj_step(m, d)
+    steps_per_s = n / (time.perf_counter() - t0)
+
+    scene = SceneSpec(walls=(Wall(-4, -3, 4, -3), Wall(-4, 3, 4, 3), Wall(4, -3, 4, 3)),
+                      cylinders=tuple(Cylinder(1.0 + 0.8 * k, (-1) ** k * 0.8, 0.2) for k in range(4)))
+    world = SimWorld(scene)
+    times = []
+    for _ in range(50 if quick else 300):
+        t0 = time.perf_counter()
+        world.scan()
+        times.append(time.perf_counter() - t0)
+    return {"physics_steps_per_s": round(steps_per_s, 1),
+            "physics_realtime_factor": round(steps_per_s * m.opt.timestep, 2),
+            "lidar_scan_ms": round(1e3 * float(np.median(times)), 4)}

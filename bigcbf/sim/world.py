@@ -1,0 +1,133 @@
+"""SimWorld: the MuJoCo physics of one scene with the robot's firmware, odometry, IMU and LiDAR.
+
+    world = SimWorld(open_room(), profile=RobotProfile(), seed=0)
+    world.command((0.5, 0.0, 0.0))     # body twist issued now, through the imperfection layer
+    world.advance(1.0)                 # physics at the model timestep (2 ms)
+    world.odom(), world.true_state(), world.imu(), world.scan()
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import mujoco
+import numpy as np
+
+from ..params.robot import RobotProfile
+from ..types import LaserScan, RobotState
+from .firmware import ImperfectionLayer, WheelOdometry
+from .kinematics import MecanumKinematics
+from .lidar import Lidar, LidarConfig
+from .scene import SceneSpec, build_model, open_room
+
+WHEELS = ("fl", "fr", "rl", "rr")
+
+
+def _yaw(quat_wxyz) -> float:
+    w, x, y, z = quat_wxyz
+    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+class SimWorld:
+    """One episode's physics. Deterministic for a given scene, profile, seed and command sequence."""
+
+    def __init__(self, scene: SceneSpec | None = None, profile: RobotProfile = RobotProfile(), seed: int = 0,
+                 lidar: LidarConfig = LidarConfig(), kinematics: MecanumKinematics = MecanumKinematics(),
+                 model: mujoco.MjModel | None = None):
+        self.scene = scene or open_room()
+        if profile.floor_friction is not None:
+            from dataclasses import replace
+            self.scene = replace(self.scene, floor_friction=profile.floor_friction)
+        self.model = model if model is not None else build_model(self.scene)
+        self.data = mujoco.MjData(self.model)
+        self.profile = profile
+        self.kin = kinematics
+        # independent random streams, so that e.g. LiDAR noise does not change the execution residuals
+        ss = np.random.SeedSequence(seed)
+        rng_exec, rng_lidar = (np.random.default_rng(s) for s in ss.spawn(2))
+        self.imperfection = ImperfectionLayer(profile, rng_exec)
+        self.lidar = Lidar(self.model, lidar, rng_lidar)
+        m = self.model
+        self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{w}_wheel") for w in WHEELS])
+        self._wheel_dof = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{w}_wheel")]
+                                    for w in WHEELS])
+        self._base = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base_link")
+        root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")
+        self._qadr, self._vadr = m.jnt_qposadr[root], m.jnt_dofadr[root]
+        self._imu_gyro = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_gyro")]
+        self._imu_acc = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_acc")]
+        self._imu_quat = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_quat")]
+        self._hooks: list[Callable[["SimWorld"], None]] = []
+        self.odometry = WheelOdometry(kinematics)
+        self.reset_pose(*self.scene.robot_start)
+
+    # --- time ----------------------------------------------------------------------------------------------
+    @property
+    def t(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def dt(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def add_pre_step(self, hook: Callable[["SimWorld"], None]) -> None:
+        """Call ``hook(world)`` before every physics step (pedestrian motion, ...)."""
+        self._hooks.append(hook)
+
+    # --- commands and stepping -------------------------------------------------------------------------------
+    def command(self, u) -> float:
+        """Issue body twist u = (vx, vy, wz) now; returns when the wheels receive it (after the latency)."""
+        u = np.asarray(u, float)
+        if u.shape != (3,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"a command is a finite body twist (vx, vy, wz), got {u!r}")
+        return self.imperfection.submit(self.t, u)
+
+    def step(self, n: int = 1) -> None:
+        m, d = self.model, self.data
+        for _ in range(n):
+            for hook in self._hooks:
+                hook(self)
+            d.ctrl[self._act] = self.kin.inverse(self.imperfection.at(self.t))
+            mujoco.mj_step(m, d)
+            self.odometry.update(d.qvel[self._wheel_dof], m.opt.timestep)
+
+    def advance(self, duration_s: float) -> None:
+        self.step(max(0, int(round(duration_s / self.dt))))
+
+    # --- state ---------------------------------------------------------------------------------------------
+    def reset_pose(self, x: float, y: float, theta: float) -> None:
+        """Put the robot at rest at (x, y, theta) on the floor; odometry restarts there."""
+        d, q = self.data, self._qadr
+        d.qpos[q:q + 3] = (x, y, self.model.qpos0[q + 2])
+        d.qpos[q + 3:q + 7] = (np.cos(theta / 2), 0.0, 0.0, np.sin(theta / 2))
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(self.model, d)
+        self.odometry.reset(x, y, theta)
+
+    def odom(self) -> RobotState:
+        """Wheel odometry: pose integrated from wheel speeds, body twist from forward kinematics."""
+        return self.odometry.state()
+
+    def true_state(self) -> RobotState:
+        """Ground truth from the simulator: pose in the world (= odom at start), body twist."""
+        d, q, v = self.data, self._qadr, self._vadr
+        R = d.xmat[self._base].reshape(3, 3)
+        vb = R.T @ d.qvel[v:v + 3]
+        wb = R.T @ d.qvel[v + 3:v + 6]
+        return RobotState(float(d.qpos[q]), float(d.qpos[q + 1]), _yaw(d.qpos[q + 3:q + 7]),
+                          float(vb[0]), float(vb[1]), float(wb[2]))
+
+    def wheel_speeds(self) -> np.ndarray:
+        return self.data.qvel[self._wheel_dof].copy()
+
+    def imu(self) -> dict:
+        s = self.data.sensordata
+        return {"orientation": tuple(s[self._imu_quat:self._imu_quat + 4]),
+                "angular_velocity": tuple(s[self._imu_gyro:self._imu_gyro + 3]),
+                "linear_acceleration": tuple(s[self._imu_acc:self._imu_acc + 3])}
+
+    def scan(self) -> LaserScan:
+        return self.lidar.scan(self.data, self.t)
+
+    def warnings(self) -> dict[str, int]:
+        """MuJoCo warnings raised so far (name -> count), empty when none."""
+        return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}

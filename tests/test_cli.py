@@ -1,0 +1,23 @@
+"""The command line, called in-process."""
+import json
+
+from bigcbf.cli import main
+
+
+def test_perf_json_has_the_simulator_figures(capsys):
+    assert main(["perf", "--json", "--quick", "--only", "bigcbf.sim.perf"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["physics_steps_per_s"] > 1000 and 0 < out["lidar_scan_ms"] < 50
+
+
+def test_unknown_subcommand_and_bad_argument_exit_2(capsys):
+    assert main(["no-such-command"]) == 2
+    assert main(["perf", "--bogus"]) == 2
+
+
+def test_demo_prints_commanded_and_achieved(capsys):
+    assert main(["demo", "--no-video"]) == 0
+    out = capsys.readouterr().out
+    assert "forward" in out and "spin" in out
+    fwd = next(line for line in out.splitlines() if line.startswith("forward")).split()
+    assert abs(float(fwd[4]) - 0.5) < 0.025      # achieved vx within 5 % of the commanded 0.5 m/s
