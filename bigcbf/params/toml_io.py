@@ -76,6 +76,9 @@ def from_dict(cls: type[T], data: dict, *, file: str | None = None, prefix: str 
         if key not in fields:
             raise UserError(f"unknown key (known: {', '.join(sorted(fields))})", file=file, field=name)
         kwargs[key] = _convert(hints[key], value, file, name)
+    for key, f in fields.items():
+        if key not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise UserError("missing key", file=file, field=f"{prefix}.{key}" if prefix else key)
     try:
         return cls(**kwargs)
     except UserError:

@@ -69,7 +69,7 @@ class FloorPatch:
     half_x: float
     half_y: float
     friction: float
-    rgba: tuple[float, float, float, float] = (0.55, 0.75, 0.90, 1.0)
+    rgba: tuple[float, float, float, float] = (0.30, 0.50, 0.62, 1.0)
 
 
 @dataclass(frozen=True)
@@ -123,7 +123,8 @@ def compose(spec: SceneSpec) -> mjcf.RootElement:
         wb.add("site", name="goal", type="cylinder", size=(0.15, 0.002), pos=(*spec.goal, 0.002),
                rgba=(0.1, 0.9, 0.2, 0.6), group=0)
     # cameras: a top-down view over the scene and one that tracks the robot
-    wb.add("camera", name="top", pos=(0, 0, 10.0), euler=(0, 0, 0), fovy=2.1 * spec.extent)
+    cx, cy = spec.robot_start[:2] if spec.goal is None else (np.add(spec.robot_start[:2], spec.goal) / 2)
+    wb.add("camera", name="top", pos=(cx, cy, 10.0), euler=(0, 0, 0), fovy=2.1 * spec.extent)
     base = root.find("body", "base_link")
     base.add("camera", name="track", mode="track", pos=(-1.6, 0, 1.5), xyaxes=(0, -1, 0, 0.68, 0, 0.73))
     return root
