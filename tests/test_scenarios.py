@@ -76,7 +76,7 @@ def test_reactive_pedestrian_steps_aside_for_the_robot_non_reactive_does_not():
     for reactive in (True, False):
         peds = Pedestrians([[(0, 0), (6, 0)]], [1.0], [0.0], [0.25], [False], [reactive])
         dev = 0.0
-        for k in range(1500):
+        for k in range(2000):
             peds.step(k * 0.002, 0.002, robot_xy=(3.0, -0.2))
             dev = max(dev, abs(peds.p[0, 1]))
         out.append(dev)
