@@ -16,7 +16,7 @@ def test_unknown_subcommand_and_bad_argument_exit_2(capsys):
 
 
 def test_demo_prints_commanded_and_achieved(capsys):
-    assert main(["demo", "--no-video"]) == 0
+    assert main(["demo", "--manoeuvre", "--no-video"]) == 0
     out = capsys.readouterr().out
     assert "forward" in out and "spin" in out
     fwd = next(line for line in out.splitlines() if line.startswith("forward")).split()

@@ -13,7 +13,7 @@ import sys
 from ..errors import UserError
 
 #: Subcommands, in the order ``bigcbf --help`` lists them.
-COMMANDS = ["scenarios", "demo", "perf"]
+COMMANDS = ["scenarios", "run", "demo", "perf"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,108 @@
+"""Ground truth from the simulator: true clearances, physical contact, and obstacles for the truth mode.
+
+Clearance (paper Eq. (6), left-hand side minus r_R + r_i): the distance from the robot's true centre to each
+obstacle's true surface, minus the robot's footprint radius r_R. Walls and boxes are oriented rectangles,
+cylinders and pedestrians circles (pedestrian capsules seen from above).
+"""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from ..types import Obstacles
+from .scene import SceneSpec
+
+
+class GroundTruth:
+    def __init__(self, model: mujoco.MjModel, scene: SceneSpec, r_robot: float = 0.15):
+        self.r_robot = r_robot
+        rects = []
+        for w in scene.walls:
+            a, b = np.array([w.x0, w.y0]), np.array([w.x1, w.y1])
+            L = np.linalg.norm(b - a)
+            rects.append(((a + b) / 2, (L / 2 + w.thickness / 2, w.thickness / 2), np.arctan2(*(b - a)[::-1])))
+        for o in scene.boxes:
+            rects.append(((o.x, o.y), (o.half_x, o.half_y), o.yaw))
+        self.rect_c = np.array([r[0] for r in rects], float).reshape(-1, 2)
+        self.rect_h = np.array([r[1] for r in rects], float).reshape(-1, 2)
+        yaw = np.array([r[2] for r in rects], float)
+        self.rect_cos, self.rect_sin = np.cos(yaw), np.sin(yaw)
+        self.circ_c = np.array([(c.x, c.y) for c in scene.cylinders], float).reshape(-1, 2)
+        self.circ_r = np.array([c.radius for c in scene.cylinders], float)
+        self.ped_r = np.array([p.radius for p in scene.pedestrians], float)
+        # physical contact: robot geoms against obstacle geoms (not the floor)
+        body_root = model.body_rootid[model.geom_bodyid]
+        base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base_link")
+        self.robot_geom = body_root == base
+        self.obstacle_geom = (~self.robot_geom) & (model.geom_group >= 1) & (model.geom_group <= 2)
+
+    def rect_distances(self, p: np.ndarray) -> np.ndarray:
+        d = p - self.rect_c
+        lx = self.rect_cos * d[:, 0] + self.rect_sin * d[:, 1]
+        ly = -self.rect_sin * d[:, 0] + self.rect_cos * d[:, 1]
+        qx = np.maximum(np.abs(lx) - self.rect_h[:, 0], 0)
+        qy = np.maximum(np.abs(ly) - self.rect_h[:, 1], 0)
+        return np.hypot(qx, qy)
+
+    def clearance(self, p, ped_p: np.ndarray) -> float:
+        """min over obstacles of (distance from the robot centre to the obstacle surface) - r_R."""
+        p = np.asarray(p, float)
+        ds = [np.inf]
+        if len(self.rect_c):
+            ds.append(self.rect_distances(p).min())
+        if len(self.circ_c):
+            ds.append((np.linalg.norm(self.circ_c - p, axis=1) - self.circ_r).min())
+        if len(ped_p):
+            ds.append((np.linalg.norm(ped_p - p, axis=1) - self.ped_r).min())
+        return float(min(ds) - self.r_robot)
+
+    def in_contact(self, data: mujoco.MjData) -> bool:
+        """Physical contact between the robot and any obstacle, wall or pedestrian (MuJoCo's contacts)."""
+        n = data.ncon
+        if n == 0:
+            return False
+        g = data.contact.geom[:n]
+        a, b = g[:, 0], g[:, 1]
+        hit = (self.robot_geom[a] & self.obstacle_geom[b]) | (self.robot_geom[b] & self.obstacle_geom[a])
+        return bool(hit.any())
+
+    def obstacles(self, p, ped_p: np.ndarray, ped_v: np.ndarray, wall_points: int = 16,
+                  max_range: float = 8.0) -> Obstacles:
+        """Truth-mode obstacles (debugging/ablation only): pedestrians and cylinders as exact circles; walls and
+        boxes as their nearest surface points to the robot (radius 0), like the LiDAR pipeline's wall points."""
+        p = np.asarray(p, float)
+        parts = []
+        if len(ped_p):
+            parts.append(Obstacles.from_lists(ped_p, ped_v, self.ped_r, static=False,
+                                              ids=np.arange(len(ped_p))))
+        if len(self.circ_c):
+            parts.append(Obstacles.from_lists(self.circ_c, None, self.circ_r, static=True,
+                                              ids=100 + np.arange(len(self.circ_c))))
+        if len(self.rect_c):
+            pts = self._rect_surface_points(p)
+            d = np.linalg.norm(pts - p, axis=1)
+            keep = np.argsort(d)[:wall_points]
+            keep = keep[d[keep] < max_range]
+            parts.append(Obstacles.from_lists(pts[keep], None, 0.0, static=True, ids=-np.ones(len(keep), int)))
+        out = Obstacles.empty()
+        for part in parts:
+            out = out.concat(part)
+        return out
+
+    def _rect_surface_points(self, p: np.ndarray, spacing: float = 0.25) -> np.ndarray:
+        """Points on every rectangle's boundary, spaced ~spacing, plus each rectangle's closest point to p."""
+        pts = []
+        for c, h, co, si in zip(self.rect_c, self.rect_h, self.rect_cos, self.rect_sin):
+            R = np.array([[co, -si], [si, co]])
+            local = R.T @ (p - c)
+            closest = np.clip(local, -h, h)
+            if np.all(np.abs(local) <= h):          # inside (only after a collision): project to the nearest side
+                k = int(np.argmin(h - np.abs(local)))
+                closest[k] = np.sign(local[k]) * h[k]
+            pts.append(c + R @ closest)
+            nx, ny = max(2, int(2 * h[0] / spacing) + 1), max(2, int(2 * h[1] / spacing) + 1)
+            xs, ys = np.linspace(-h[0], h[0], nx), np.linspace(-h[1], h[1], ny)
+            edge = np.concatenate([np.stack([xs, np.full(nx, s * h[1])], 1) for s in (-1, 1)] +
+                                  [np.stack([np.full(ny, s * h[0]), ys], 1) for s in (-1, 1)])
+            pts.extend(c + edge @ R.T)
+        return np.array(pts).reshape(-1, 2)
