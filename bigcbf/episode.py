@@ -19,6 +19,7 @@ import numpy as np
 
 from .control.cbf import CbfFilter
 from .control.methods import METHODS
+from .control.metrics import cbf_energy
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
@@ -127,7 +128,6 @@ class Episode:
         wall0 = time.perf_counter()
         steps_per_control = int(round(p.T_C_s / w.dt))
         steps_per_scan = int(round(1.0 / w.lidar.config.rate_hz / w.dt))
-        R_u = np.asarray(p.R_u, float)
         e_cbf, active, infeasible, n_ctrl, stopped = 0.0, 0, 0, 0, 0.0
         planner_ms, cbf_ms, percep_ms = [], [], []
         modes: list[tuple[float, str]] = []
@@ -159,8 +159,7 @@ class Episode:
                 if pinfo.planned:
                     planner_ms.append(pinfo.planner_ms)
                 cbf_ms.append(finfo.solve_ms)
-                du = np.asarray(u_safe) - np.asarray(u_in)
-                e_cbf += float(du @ R_u @ du)
+                e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
                 active += bool(finfo.active)
                 infeasible += bool(finfo.infeasible)
                 n_ctrl += 1

@@ -57,7 +57,9 @@ class ImperfectionLayer:
 
 
 class WheelOdometry:
-    """Pose integrated from measured wheel speeds (forward kinematics), as the robot's own odometry does."""
+    """Odometry as the robot computes it: body velocity from the measured wheel speeds (forward kinematics),
+    heading from the IMU's yaw rate when one is given (wheel + IMU fusion, as on the paper's robot: Mecanum
+    rollers slip in yaw, which the wheels cannot see), position integrated in that heading."""
 
     def __init__(self, kin: MecanumKinematics, x: float = 0.0, y: float = 0.0, theta: float = 0.0):
         self.kin = kin
@@ -67,8 +69,11 @@ class WheelOdometry:
         self.x, self.y, self.theta = float(x), float(y), float(theta)
         self.twist = np.zeros(3)
 
-    def update(self, wheel_speeds, dt: float) -> None:
-        vx, vy, wz = self.twist = self.kin.forward(wheel_speeds)
+    def update(self, wheel_speeds, dt: float, gyro_z: float | None = None) -> None:
+        self.twist = self.kin.forward(wheel_speeds)
+        if gyro_z is not None:
+            self.twist[2] = gyro_z
+        vx, vy, wz = self.twist
         mid = self.theta + 0.5 * wz * dt          # midpoint heading (second order)
         c, s = np.cos(mid), np.sin(mid)
         self.x += (c * vx - s * vy) * dt

@@ -88,7 +88,7 @@ class SimWorld:
                 hook(self)
             d.ctrl[self._act] = self.kin.inverse(self.imperfection.at(self.t))
             mujoco.mj_step(m, d)
-            self.odometry.update(d.qvel[self._wheel_dof], m.opt.timestep)
+            self.odometry.update(d.qvel[self._wheel_dof], m.opt.timestep, d.sensordata[self._imu_gyro + 2])
 
     def advance(self, duration_s: float) -> None:
         self.step(max(0, int(round(duration_s / self.dt))))
@@ -104,7 +104,7 @@ class SimWorld:
         self.odometry.reset(x, y, theta)
 
     def odom(self) -> RobotState:
-        """Wheel odometry: pose integrated from wheel speeds, body twist from forward kinematics."""
+        """Odometry: body velocity from the wheel speeds, heading from the IMU gyro (see WheelOdometry)."""
         return self.odometry.state()
 
     def true_state(self) -> RobotState:
