@@ -9,6 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from ..perception.ground_truth import ground_truth_obstacles, rectangle_segments
 from ..types import Obstacles
 from .scene import SceneSpec
 
@@ -27,6 +28,8 @@ class GroundTruth:
         self.rect_h = np.array([r[1] for r in rects], float).reshape(-1, 2)
         yaw = np.array([r[2] for r in rects], float)
         self.rect_cos, self.rect_sin = np.cos(yaw), np.sin(yaw)
+        self.segments = np.array([rectangle_segments(*c, *h, y) for c, h, y in
+                                  zip(self.rect_c, self.rect_h, yaw)]).reshape(-1, 4)
         self.circ_c = np.array([(c.x, c.y) for c in scene.cylinders], float).reshape(-1, 2)
         self.circ_r = np.array([c.radius for c in scene.cylinders], float)
         self.ped_r = np.array([p.radius for p in scene.pedestrians], float)
@@ -35,6 +38,16 @@ class GroundTruth:
         base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base_link")
         self.robot_geom = body_root == base
         self.obstacle_geom = (~self.robot_geom) & (model.geom_group >= 1) & (model.geom_group <= 2)
+
+    def obstacles(self, p, ped_p: np.ndarray, ped_v: np.ndarray) -> Obstacles:
+        """Truth-mode obstacle estimates (debugging and ablations only, flagged as such): pedestrians and
+        cylinders as exact circles, walls and boxes as wall points, laid out as the LiDAR pipeline does."""
+        centers = np.concatenate([ped_p.reshape(-1, 2), self.circ_c])
+        vels = np.concatenate([ped_v.reshape(-1, 2), np.zeros_like(self.circ_c)])
+        radii = np.concatenate([self.ped_r, self.circ_r])
+        static = np.concatenate([np.zeros(len(self.ped_r), bool), np.ones(len(self.circ_r), bool)])
+        return ground_truth_obstacles(np.asarray(p, float), centers, vels, radii, segments=self.segments,
+                                      static=static)
 
     def rect_distances(self, p: np.ndarray) -> np.ndarray:
         d = p - self.rect_c
@@ -65,44 +78,3 @@ class GroundTruth:
         a, b = g[:, 0], g[:, 1]
         hit = (self.robot_geom[a] & self.obstacle_geom[b]) | (self.robot_geom[b] & self.obstacle_geom[a])
         return bool(hit.any())
-
-    def obstacles(self, p, ped_p: np.ndarray, ped_v: np.ndarray, wall_points: int = 16,
-                  max_range: float = 8.0) -> Obstacles:
-        """Truth-mode obstacles (debugging/ablation only): pedestrians and cylinders as exact circles; walls and
-        boxes as their nearest surface points to the robot (radius 0), like the LiDAR pipeline's wall points."""
-        p = np.asarray(p, float)
-        parts = []
-        if len(ped_p):
-            parts.append(Obstacles.from_lists(ped_p, ped_v, self.ped_r, static=False,
-                                              ids=np.arange(len(ped_p))))
-        if len(self.circ_c):
-            parts.append(Obstacles.from_lists(self.circ_c, None, self.circ_r, static=True,
-                                              ids=100 + np.arange(len(self.circ_c))))
-        if len(self.rect_c):
-            pts = self._rect_surface_points(p)
-            d = np.linalg.norm(pts - p, axis=1)
-            keep = np.argsort(d)[:wall_points]
-            keep = keep[d[keep] < max_range]
-            parts.append(Obstacles.from_lists(pts[keep], None, 0.0, static=True, ids=-np.ones(len(keep), int)))
-        out = Obstacles.empty()
-        for part in parts:
-            out = out.concat(part)
-        return out
-
-    def _rect_surface_points(self, p: np.ndarray, spacing: float = 0.25) -> np.ndarray:
-        """Points on every rectangle's boundary, spaced ~spacing, plus each rectangle's closest point to p."""
-        pts = []
-        for c, h, co, si in zip(self.rect_c, self.rect_h, self.rect_cos, self.rect_sin):
-            R = np.array([[co, -si], [si, co]])
-            local = R.T @ (p - c)
-            closest = np.clip(local, -h, h)
-            if np.all(np.abs(local) <= h):          # inside (only after a collision): project to the nearest side
-                k = int(np.argmin(h - np.abs(local)))
-                closest[k] = np.sign(local[k]) * h[k]
-            pts.append(c + R @ closest)
-            nx, ny = max(2, int(2 * h[0] / spacing) + 1), max(2, int(2 * h[1] / spacing) + 1)
-            xs, ys = np.linspace(-h[0], h[0], nx), np.linspace(-h[1], h[1], ny)
-            edge = np.concatenate([np.stack([xs, np.full(nx, s * h[1])], 1) for s in (-1, 1)] +
-                                  [np.stack([np.full(ny, s * h[0]), ys], 1) for s in (-1, 1)])
-            pts.extend(c + edge @ R.T)
-        return np.array(pts).reshape(-1, 2)
