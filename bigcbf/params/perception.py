@@ -1,0 +1,139 @@
+"""Perception parameters: LiDAR clustering, circle fitting, tracking (CV Kalman filter), static/dynamic
+hysteresis, wall representation and the laser's mounting on the robot.
+
+Every key is optional in a TOML table (``from_dict(PerceptionParams, table)``); the defaults suit the simulated
+360-beam, 10 Hz LiDAR of the Rosmaster X3 model. Units are in the field names (``_m``, ``_s``, ``_rad``,
+``_mps``, ``_m2``). What each group does is documented in ``bigcbf/perception/`` next to the code that uses it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+
+@dataclass(frozen=True)
+class PerceptionParams:
+    """Parameters of :class:`bigcbf.perception.Perception` (see the module docstring for the file format)."""
+
+    # --- laser mounting: pose of the laser frame in base_link -------------------------------------------------
+    laser_x_m: float = 0.0435
+    laser_y_m: float = 0.0
+    laser_yaw_rad: float = 0.0
+
+    # --- clustering (scan-order segmentation) -------------------------------------------------------------------
+    #: Consecutive valid beams belong to one cluster when their points are closer than
+    #: max(cluster_dist_m, adaptive breakpoint distance) -- Borges & Aldon (2004): r * sin(dphi) / sin(lambda - dphi)
+    #: + 3 * range_sigma_m, with lambda = cluster_lambda_rad (the shallowest incidence still joined).
+    cluster_dist_m: float = 0.15
+    cluster_lambda_rad: float = 0.1745
+    #: The LiDAR's range noise (standard deviation); set it to match the sensor.
+    range_sigma_m: float = 0.01
+    #: Clusters with fewer points are not objects (single returns of grazing surfaces, thin things): they become
+    #: wall points. So does a compact cluster that is not a clean arc and whose median point spacing exceeds
+    #: grazing_spacing_factor times the beam spacing at its range (a surface seen at a grazing angle, e.g. a piece
+    #: of wall, whose apparent centre slides as the robot moves).
+    min_points: int = 3
+    grazing_spacing_factor: float = 3.0
+    #: Clusters longer than this (largest distance between two of their points) are walls / extended structure.
+    compact_max_extent_m: float = 0.9
+    #: A compact cluster cut at one of its ends by a nearer return on the adjacent beam (partly hidden) is kept
+    #: as a track measurement only when it is a clean arc (the circle fit is accepted); otherwise (e.g. a piece of
+    #: wall visible between pedestrians, whose apparent centre would slide) it becomes wall points.
+
+    # --- circle fit ------------------------------------------------------------------------------------------------
+    radius_min_m: float = 0.05
+    radius_max_m: float = 0.6
+    #: A compact cluster is a circle (algebraic fit; radius clamped to [radius_min_m, radius_max_m]) when that fits
+    #: at least as well as a rectangle (L-shape fit) and the points span at least fit_min_arc_rad around its centre.
+    fit_min_arc_rad: float = 0.5
+    #: ...and, for a cluster not partly hidden, at least this fraction of the arc that the beams sample on a circle
+    #: of radius r at distance d (see ``geometry.measure_compact``).
+    fit_span_ratio: float = 0.5
+    #: Track radius: exponential smoothing factor of the measured radius (1 = last measurement only).
+    radius_smoothing: float = 0.3
+
+    # --- association and track management ---------------------------------------------------------------------------
+    #: A cluster may update a track when its Mahalanobis distance squared is below gate_chi2 (2 dof; 9.21 = 99 %)
+    #: or its centre is within gate_min_m of the prediction, and never when farther than gate_max_m.
+    gate_chi2: float = 9.21
+    gate_min_m: float = 0.3
+    gate_max_m: float = 1.0
+    #: ...and only when the cluster's radius is within gate_radius_m of the track's.
+    gate_radius_m: float = 0.15
+    #: At most max_tracks confirmed tracks are returned (nearest first); up to max_candidates are maintained.
+    max_tracks: int = 8
+    max_candidates: int = 32
+    #: A tentative track is confirmed after confirm_hits measurements, deleted after tentative_max_misses misses.
+    confirm_hits: int = 3
+    tentative_max_misses: int = 1
+    #: A confirmed track without measurement coasts (constant velocity, growing covariance) for coast_s, then is
+    #: deleted (e.g. a pedestrian hidden behind a wall or another pedestrian).
+    coast_s: float = 1.0
+
+    # --- constant-velocity Kalman filter ----------------------------------------------------------------------------
+    #: Measurement noise of a cluster centre (standard deviation per axis).
+    meas_sigma_m: float = 0.05
+    #: Power spectral density of the white-noise acceleration (m^2/s^3).
+    accel_psd_m2ps3: float = 0.5
+    #: Initial velocity standard deviation of a new track (velocity starts at 0).
+    init_vel_sigma_mps: float = 1.5
+
+    # --- static / dynamic hysteresis --------------------------------------------------------------------------------
+    #: A static track becomes dynamic after n_dynamic consecutive updates with speed > v_dynamic_mps and speed >
+    #: dynamic_sigma standard deviations of the speed estimate; a dynamic one becomes static after n_static
+    #: consecutive updates with speed < v_static_mps. New tracks start static.
+    v_dynamic_mps: float = 0.3
+    v_static_mps: float = 0.15
+    n_dynamic: int = 3
+    n_static: int = 5
+    dynamic_sigma: float = 1.0
+
+    # --- walls ------------------------------------------------------------------------------------------------------
+    #: Each wall cluster contributes its point nearest to the robot and points spaced wall_spacing_m along the
+    #: cluster from there; of those within wall_range_m of the robot the wall_max_points nearest are returned.
+    wall_spacing_m: float = 0.2
+    wall_range_m: float = 3.0
+    wall_max_points: int = 24
+    #: Fixed position covariance of a wall point (isotropic, m^2).
+    wall_cov_m2: float = 1e-4
+
+    # --- ground-truth mode (debugging and ablations only) -----------------------------------------------------------
+    #: Position covariance given to objects in ground-truth mode (isotropic, m^2).
+    ground_truth_cov_m2: float = 1e-4
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{f.name} must be finite")
+        positive = ("cluster_dist_m", "grazing_spacing_factor", "compact_max_extent_m",
+                    "radius_min_m", "gate_chi2", "gate_max_m", "gate_radius_m", "coast_s", "meas_sigma_m",
+                    "init_vel_sigma_mps", "v_static_mps", "wall_spacing_m", "wall_range_m")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0")
+        non_negative = ("range_sigma_m", "fit_span_ratio", "fit_min_arc_rad", "gate_min_m",
+                        "accel_psd_m2ps3", "dynamic_sigma", "wall_cov_m2", "ground_truth_cov_m2")
+        for name in non_negative:
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0")
+        if not 0 < self.cluster_lambda_rad < math.pi / 2:
+            raise ValueError("cluster_lambda_rad must be in (0, pi/2)")
+        if self.radius_max_m < self.radius_min_m:
+            raise ValueError("radius_max_m must be >= radius_min_m")
+        if not 0 < self.radius_smoothing <= 1:
+            raise ValueError("radius_smoothing must be in (0, 1]")
+        if self.gate_min_m > self.gate_max_m:
+            raise ValueError("gate_min_m must be <= gate_max_m")
+        if self.min_points < 2:
+            raise ValueError("min_points must be >= 2")
+        if self.max_tracks < 0 or self.wall_max_points < 0:
+            raise ValueError("max_tracks and wall_max_points must be >= 0")
+        if self.max_candidates < self.max_tracks:
+            raise ValueError("max_candidates must be >= max_tracks")
+        if self.confirm_hits < 1 or self.tentative_max_misses < 0:
+            raise ValueError("confirm_hits must be >= 1 and tentative_max_misses >= 0")
+        if self.n_dynamic < 1 or self.n_static < 1:
+            raise ValueError("n_dynamic and n_static must be >= 1")
+        if not self.v_static_mps < self.v_dynamic_mps:
+            raise ValueError("v_static_mps must be < v_dynamic_mps (hysteresis band)")

@@ -1,0 +1,306 @@
+"""Scan geometry: beams to points in odom, scan-order clustering, circle and rectangle fits, wall points.
+
+Pure numpy; no simulator import (this runs on the robot).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params.perception import PerceptionParams
+from ..types import LaserScan
+
+
+def rot(theta: float) -> np.ndarray:
+    """2-D rotation matrix R(theta)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+@dataclass(frozen=True)
+class ScanPoints:
+    """The valid returns of one scan, in scan order.
+
+    xy (N,2) points in odom [m]; ranges (N,) [m]; beam (N,) beam indices; sensor (2,) laser origin in odom [m].
+    """
+
+    xy: np.ndarray
+    ranges: np.ndarray
+    beam: np.ndarray
+    sensor: np.ndarray
+    angle_increment: float
+    n_beams: int
+
+
+def scan_to_points(scan: LaserScan, pose: tuple[float, float, float], params: PerceptionParams) -> ScanPoints:
+    """Valid beams (finite, within [range_min, range_max]) as points in odom.
+
+    laser -> base_link by the mounting (laser_x_m, laser_y_m, laser_yaw_rad), base_link -> odom by the pose
+    (x, y, theta) at the scan's stamp: p_odom = R(theta) (R(yaw_l) r [cos a, sin a] + t_l) + (x, y).
+    The scan is taken as instantaneous (no per-beam motion correction).
+    """
+    r = np.asarray(scan.ranges, dtype=float)
+    n = len(r)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+    beam = np.flatnonzero(ok)
+    rv = r[beam]
+    x, y, th = (float(v) for v in pose)
+    a = scan.angle_min + scan.angle_increment * beam + params.laser_yaw_rad + th
+    t_l = rot(th) @ np.array([params.laser_x_m, params.laser_y_m])
+    sensor = np.array([x, y]) + t_l
+    xy = np.stack([sensor[0] + rv * np.cos(a), sensor[1] + rv * np.sin(a)], axis=1)
+    return ScanPoints(xy, rv, beam, sensor, float(scan.angle_increment), n)
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """One cluster: indices into ScanPoints (scan order, may wrap around), and whether a nearer return on the
+    adjacent beam cuts it at its start or end (partial occlusion)."""
+
+    idx: np.ndarray
+    occluded: bool
+
+
+def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
+    """Scan-order segmentation of the valid points into clusters.
+
+    Consecutive points (i, i+1) join when d_i <= max(cluster_dist_m, r_i sin(dphi) / sin(lambda - dphi) + 3 sigma_r)
+    (adaptive breakpoint detector, Borges & Aldon 2004; dphi the beam spacing), the adaptive term only for adjacent
+    beams (missed beams between two points mean free space: then only cluster_dist_m). The scan is
+    circular: the last point may join the first. A wall seen at a shallower angle than lambda breaks into fragments;
+    the pipeline turns those into wall points (few points, or grazing spacing).
+    """
+    n = len(sp.ranges)
+    if n == 0:
+        return []
+    if n == 1:
+        return [Cluster(np.array([0]), False)]
+    p = sp.xy
+    nxt = np.roll(np.arange(n), -1)
+    d = np.linalg.norm(p[nxt] - p, axis=1)                                  # d[i] = |p[i+1] - p[i]|
+    dbeam = (sp.beam[nxt] - sp.beam) % sp.n_beams
+    dbeam[dbeam == 0] = sp.n_beams
+    dphi = sp.angle_increment
+    lam = params.cluster_lambda_rad
+    # the adaptive distance only between adjacent beams: across missed beams there is free space between the points
+    abd = np.where((dbeam == 1) & (dphi < lam),
+                   sp.ranges * np.sin(dphi) / np.sin(max(lam - dphi, 1e-9)) + 3 * params.range_sigma_m, 0.0)
+    join = d <= np.maximum(params.cluster_dist_m, abd)
+    if join.all():
+        return [Cluster(np.arange(n), False)]
+    # rotate so the scan starts right after a break; then cluster labels are a cumulative sum of breaks
+    start = (int(np.flatnonzero(~join)[0]) + 1) % n
+    order = np.roll(np.arange(n), -start)
+    breaks = ~join[order]                                                    # break after order[k]
+    labels = np.concatenate([[0], np.cumsum(breaks[:-1])])
+    bounds = np.flatnonzero(np.diff(labels)) + 1
+    out = []
+    for seg in np.split(order, bounds):
+        first, last = seg[0], seg[-1]
+        prev, nextp = (first - 1) % n, (last + 1) % n
+        occ = False
+        # a nearer return on the adjacent beam hides part of this cluster
+        if (sp.beam[first] - sp.beam[prev]) % sp.n_beams == 1 and sp.ranges[prev] < sp.ranges[first]:
+            occ = True
+        if (sp.beam[nextp] - sp.beam[last]) % sp.n_beams == 1 and sp.ranges[nextp] < sp.ranges[last]:
+            occ = True
+        out.append(Cluster(seg, occ))
+    return out
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    return np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
+
+
+def extent(points: np.ndarray, limit: float) -> float:
+    """The largest distance between two points, or a value > limit as soon as it exceeds limit (cheap for walls)."""
+    e1 = float(np.max(_norms(points - points[0])))
+    if e1 > limit or len(points) > 400:
+        return e1
+    dx = points[:, None, 0] - points[None, :, 0]
+    dy = points[:, None, 1] - points[None, :, 1]
+    return float(np.sqrt(np.max(dx * dx + dy * dy)))
+
+
+def fit_circle(points: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Algebraic (Kasa) circle fit: the least-squares solution of 2 u uc + 2 v vc + c = u^2 + v^2 in coordinates
+    (u, v) centred on the points' mean, in closed form: [[Suu, Suv], [Suv, Svv]] [uc, vc] = 1/2 [Suuu + Suvv,
+    Svvv + Svuu], r^2 = uc^2 + vc^2 + (Suu + Svv) / n (S.. are sums over the points).
+
+    Returns (center (2,), radius, rms of |p - center| - radius); radius = inf for (near-)collinear points.
+    """
+    n = len(points)
+    m = points.mean(axis=0)
+    u, v = points[:, 0] - m[0], points[:, 1] - m[1]
+    uu, vv, uv = u * u, v * v, u * v
+    suu, svv, suv = uu.sum(), vv.sum(), uv.sum()
+    det = suu * svv - suv * suv
+    if n < 3 or det <= 1e-10 * (suu + svv) ** 2:
+        return m, float("inf"), float("inf")
+    b1 = 0.5 * float(np.dot(u, uu + vv))
+    b2 = 0.5 * float(np.dot(v, uu + vv))
+    uc = (svv * b1 - suv * b2) / det
+    vc = (suu * b2 - suv * b1) / det
+    r = float(np.sqrt(uc * uc + vc * vc + (suu + svv) / n))
+    res = np.sqrt((u - uc) ** 2 + (v - vc) ** 2) - r
+    return m + np.array([uc, vc]), r, float(np.sqrt(np.mean(res * res)))
+
+
+def fit_circle_fixed_radius(points: np.ndarray, radius: float, center0: np.ndarray,
+                            iterations: int = 10) -> tuple[np.ndarray, float]:
+    """Geometric circle fit with a fixed radius: the centre c minimising sum_i (|p_i - c| - radius)^2, by
+    Gauss-Newton from center0. Returns (center, rms of |p - c| - radius)."""
+    cx, cy = float(center0[0]), float(center0[1])
+    px, py = points[:, 0], points[:, 1]
+    for _ in range(iterations):
+        ux, uy = cx - px, cy - py
+        dist = np.maximum(np.sqrt(ux * ux + uy * uy), 1e-9)
+        res = dist - radius
+        jx, jy = ux / dist, uy / dist                              # d res / d c
+        a, b, d = jx @ jx, jx @ jy, jy @ jy
+        gx, gy = jx @ res, jy @ res
+        det = a * d - b * b
+        if det <= 1e-12:
+            break
+        sx, sy = -(d * gx - b * gy) / det, -(a * gy - b * gx) / det
+        cx, cy = cx + sx, cy + sy
+        if sx * sx + sy * sy < 1e-14:
+            break
+    res = np.sqrt((px - cx) ** 2 + (py - cy) ** 2) - radius
+    return np.array([cx, cy]), float(np.sqrt(np.mean(res * res)))
+
+
+#: Orientations searched by the rectangle fit: 0..90 degrees in 1-degree steps, then +-1 degree in 0.05-degree steps.
+_COARSE = np.deg2rad(np.arange(90.0))
+_COARSE_E1 = np.stack([np.cos(_COARSE), np.sin(_COARSE)], axis=1)
+_COARSE_E2 = np.stack([-np.sin(_COARSE), np.cos(_COARSE)], axis=1)
+_FINE = np.deg2rad(np.arange(-1.0, 1.0001, 0.05))
+
+
+def _edge_distances(points: np.ndarray, e1: np.ndarray, e2: np.ndarray):
+    """For K orientations (unit axes e1, e2 (K,2)): the bounding rectangle's limits along e1 and e2 and each point's
+    distance to the nearest edge (K, n)."""
+    a, b = e1 @ points.T, e2 @ points.T                                   # (K, n)
+    amin, amax = a.min(axis=1), a.max(axis=1)
+    bmin, bmax = b.min(axis=1), b.max(axis=1)
+    d = np.minimum(np.minimum(a - amin[:, None], amax[:, None] - a), np.minimum(b - bmin[:, None], bmax[:, None] - b))
+    return amin, amax, bmin, bmax, d
+
+
+def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Rectangle (L-shape) fit: the orientation whose bounding rectangle the points hug best, i.e. the least sum of
+    squared distances from each point to the nearest edge (a search-based L-shape fit in the manner of Zhang et al.
+    2017, "Efficient L-shape fitting for vehicle detection using laser scanners", with a squared-distance criterion;
+    1-degree search over 0..89 degrees, refined to 0.05 degree).
+
+    A convex object seen from outside shows one or two faces, but its depth is unknown when one face shows, and the
+    second face of an L seen at a grazing angle is sampled by few beams (its length is underestimated by up to one
+    beam spacing along it). The rectangle is therefore completed into a square of its long side, extending away
+    from the sensor: exact for square boxes, conservative for an L of an oblong box. Returns (center (2,),
+    radius = half the square's diagonal, rms of the points' distance to the nearest edge).
+    """
+    *_, d = _edge_distances(points, _COARSE_E1, _COARSE_E2)
+    ang = _COARSE[int(np.argmin(np.einsum("kn,kn->k", d, d)))] + _FINE
+    c, sn = np.cos(ang), np.sin(ang)
+    e1s, e2s = np.stack([c, sn], axis=1), np.stack([-sn, c], axis=1)
+    amin, amax, bmin, bmax, d = _edge_distances(points, e1s, e2s)
+    j = int(np.argmin(np.einsum("kn,kn->k", d, d)))
+    e1, e2 = e1s[j], e2s[j]
+    la, lb = float(amax[j] - amin[j]), float(bmax[j] - bmin[j])
+    center = (amax[j] + amin[j]) / 2 * e1 + (bmax[j] + bmin[j]) / 2 * e2
+    rms = float(np.sqrt(np.mean(d[j] ** 2)))
+    short, long_ = min(la, lb), max(la, lb)
+    normal = e2 if la >= lb else e1
+    if normal @ (center - sensor) < 0:
+        normal = -normal
+    center = center + (long_ - short) / 2 * normal
+    return center, long_ / np.sqrt(2), rms
+
+
+@dataclass(frozen=True)
+class Measurement:
+    center: np.ndarray       # (2,) odom [m]
+    radius: float            # [m]
+    arc_fit: bool            # True: the circle model won; False: the rectangle model
+
+
+def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionParams,
+                    occluded: bool = False, angle_increment: float = 2 * np.pi / 360) -> Measurement:
+    """Centre and radius of a compact cluster: the better of a circle model and a rectangle model.
+
+    The centroid of an arc seen from one side is biased toward the sensor (by 2r/pi for a half circle), so it is
+    not used. Circle model: the algebraic fit (``fit_circle``); when its radius falls outside [radius_min_m,
+    radius_max_m] or its centre is not behind the surface the sensor sees (noise on a short arc), the radius is
+    clamped to that range and the centre refitted with that radius (``fit_circle_fixed_radius``). Rectangle model:
+    ``fit_rectangle`` (boxes, flat faces), its circumscribed circle. The circle model wins when
+
+    * its RMS residual is at most the rectangle's (plus range_sigma_m when the radius was not clamped: near-ties go
+      to the circle), and
+    * the points span, seen from its centre, at least fit_min_arc_rad and, unless the cluster is partly hidden
+      (``occluded``), at least fit_span_ratio of the arc that beams angle_increment apart sample on a circle of
+      that radius at that distance d: min(2 acos(r/d), 2 asin((r - d dphi)/r)) (the visible arc, less one beam
+      spacing at each silhouette). A flat face fits a wide circle with a narrow arc; a real circle shows nearly
+      half of itself.
+
+    The radius is clamped to [radius_min_m, radius_max_m].
+    """
+    dx, dy = points[:, 0] - sensor[0], points[:, 1] - sensor[1]
+    dist = np.sqrt(dx * dx + dy * dy)
+    k = int(np.argmin(dist))
+    near = points[k]
+    ray = (near - sensor) / max(float(dist[k]), 1e-9)
+    c, r, rms = fit_circle(points)
+    tol = params.range_sigma_m
+    if not (np.isfinite(r) and params.radius_min_m <= r <= params.radius_max_m and ray @ (c - near) > 0):
+        r = float(np.clip(r if np.isfinite(r) else params.radius_max_m, params.radius_min_m, params.radius_max_m))
+        c, rms = fit_circle_fixed_radius(points, r, near + r * ray)
+        tol = 0.0
+    if tol > 0 and rms <= tol:
+        rms_rect = np.inf                   # rms <= rms_rect + tol holds whatever the rectangle: skip its search
+    else:
+        rc, rr, rms_rect = fit_rectangle(points, sensor)
+    if rms <= rms_rect + tol and ray @ (c - near) > 0:
+        u = points - c
+        mid = u.mean(axis=0)
+        span = float(np.ptp(np.arctan2(u[:, 0] * mid[1] - u[:, 1] * mid[0], u @ mid)))  # angles about mid
+        need = params.fit_min_arc_rad
+        if not occluded:
+            d = float(np.linalg.norm(c - sensor))
+            sampled = min(np.arccos(min(r / d, 1.0)), np.arcsin(np.clip((r - d * angle_increment) / r, 0.0, 1.0)))
+            need = max(need, params.fit_span_ratio * 2 * sampled)
+        if span >= need:
+            return Measurement(c, r, True)
+    if not np.isfinite(rms_rect):
+        rc, rr, _ = fit_rectangle(points, sensor)
+    return Measurement(rc, float(np.clip(rr, params.radius_min_m, params.radius_max_m)), False)
+
+
+def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) -> np.ndarray:
+    """Points of one wall cluster (scan order) that represent it: the point nearest to the robot, then, walking
+    along the cluster in both directions, the first point past every multiple of ``spacing`` of path length."""
+    n = len(points)
+    if n <= 1:
+        return points
+    dx, dy = points[:, 0] - robot_xy[0], points[:, 1] - robot_xy[1]
+    j = int(np.argmin(dx * dx + dy * dy))
+    step = np.diff(points, axis=0)
+    s = np.zeros(n)
+    np.cumsum(np.sqrt(step[:, 0] ** 2 + step[:, 1] ** 2), out=s[1:])
+    bins = np.floor(np.abs(s - s[j]) / spacing)                       # path-length bin counted from point j
+    keep = np.zeros(n, bool)
+    keep[j] = True
+    keep[j + 1:] = bins[j + 1:] != bins[j:-1]                         # forward: first point of each new bin
+    keep[:j] = bins[:j] != bins[1:j + 1]                              # backward, likewise
+    order = np.flatnonzero(keep)
+    return points[np.concatenate([[j], order[order != j]])]
+
+
+def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: PerceptionParams) -> np.ndarray:
+    """The at most wall_max_points candidates nearest to the robot, within wall_range_m, nearest first."""
+    if len(candidates) == 0 or params.wall_max_points == 0:
+        return np.zeros((0, 2))
+    d = np.linalg.norm(candidates - robot_xy, axis=1)
+    order = np.argsort(d, kind="stable")
+    order = order[d[order] <= params.wall_range_m][: params.wall_max_points]
+    return candidates[order]

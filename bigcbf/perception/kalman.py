@@ -1,0 +1,63 @@
+"""Constant-velocity Kalman filter over the state [px, py, vx, vy] (odom), batched over tracks.
+
+The paper (Sec. V) tracks obstacles "using constant-velocity Kalman filters"; its obstacle model (Sec. II) predicts
+positions with constant velocity, Eq. (2), and a growing covariance, Eq. (3). The filter's position covariance
+(the upper-left 2x2 block of P) is the Sigma_i handed to the stack, where Eq. (21) uses beta sqrt(lambda_max).
+Process noise is the discretised continuous white-noise acceleration model (Bar-Shalom, Li & Kirubarajan 2001,
+Sec. 6.2.2) with power spectral density q [m^2/s^3].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def cv_transition(dt: float) -> np.ndarray:
+    """F = [[I, dt I], [0, I]]: the constant-velocity motion of Eq. (2) (p_{k+1} = p_k + dt v_k, v_{k+1} = v_k)."""
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt
+    return F
+
+
+def cv_process_noise(dt: float, q: float) -> np.ndarray:
+    """Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]] (continuous white-noise acceleration, PSD q).
+
+    Its position block grows linearly in dt for small dt times the velocity variance, the role Eq. (3)'s
+    q_Sigma dt I_2 plays in the stack's own prediction.
+    """
+    I = np.eye(2)
+    return q * np.block([[dt ** 3 / 3 * I, dt ** 2 / 2 * I], [dt ** 2 / 2 * I, dt * I]])
+
+
+def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction over dt: x' = F x (Eq. (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
+    F = cv_transition(dt)
+    Q = cv_process_noise(dt, q)
+    return x @ F.T, F @ P @ F.T + Q
+
+
+H = np.hstack([np.eye(2), np.zeros((2, 2))])
+
+
+def innovation(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var: float) -> tuple[np.ndarray, np.ndarray]:
+    """Innovation y = z - H x and its covariance S = H P H^T + R, R = meas_var I. x (N,4), P (N,4,4), z (N,2)."""
+    return z - x[:, :2], P[:, :2, :2] + meas_var * np.eye(2)
+
+
+def kf_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var: float) -> tuple[np.ndarray, np.ndarray]:
+    """Measurement update with a position measurement z (N,2): K = P H^T S^-1, x' = x + K y,
+    P' = (I - K H) P (I - K H)^T + K R K^T (Joseph form, stays symmetric positive definite)."""
+    y, S = innovation(x, P, z, meas_var)
+    K = P[:, :, :2] @ np.linalg.inv(S)                                   # P H^T = P[:, :, :2]
+    x_new = x + np.einsum("nij,nj->ni", K, y)
+    IKH = np.eye(4) - K @ H
+    R = meas_var * np.eye(2)
+    P_new = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
+    return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
+
+
+def mahalanobis2(y: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """y^T S^-1 y for innovations y (..., 2) and covariances S (..., 2, 2) (closed-form 2x2 inverse)."""
+    a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+    det = a * d - b * c
+    y0, y1 = y[..., 0], y[..., 1]
+    return (d * y0 * y0 - (b + c) * y0 * y1 + a * y1 * y1) / det

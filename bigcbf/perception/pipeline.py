@@ -1,0 +1,124 @@
+"""LiDAR perception: scan -> points in odom -> clusters -> circles (compact objects) and wall points (extended
+structure) -> tracks (CV Kalman filters, static/dynamic hysteresis) -> Obstacles.
+
+Per scan, with the robot pose (odometry) at the scan's stamp:
+
+1. valid beams become points in odom (``geometry.scan_to_points``), so velocities are not fooled by the robot's
+   own motion;
+2. scan-order clustering (``geometry.cluster_points``);
+3. a cluster longer than compact_max_extent_m is a WALL (walls, long or large obstacles). It is not forced into a
+   circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot
+   and points every wall_spacing_m along it. Returns that cannot be trusted as one whole object are wall points too,
+   since their apparent centre would slide as the robot or an occluder moves (phantom velocities): clusters with
+   fewer than min_points, and compact clusters that are not a clean arc (the circle model lost to the rectangle
+   model) and are either partly hidden by a nearer object or seen at a grazing angle (median point spacing above
+   grazing_spacing_factor beam spacings). A partly hidden arc is still a good measurement of its circle;
+4. other compact clusters give a circle (centre, radius) (``geometry.measure_compact``) fed to the tracker; a
+   circle the tracker can neither match nor start a track with (it lies inside a known object but its radius does
+   not match: two objects merged into one cluster) is represented by its wall points;
+5. the output is the confirmed tracks (at most max_tracks, nearest first; ids >= 0, r > 0, cov = KF position
+   covariance, static flag with hysteresis, v = 0 when static) CONCATENATED with the wall points (at most
+   wall_max_points, within wall_range_m of the robot, nearest first; ids -1, r 0, v 0, static, cov = wall_cov_m2 I),
+   one CBF constraint each.
+
+Why wall points: the CBF adds one constraint per obstacle, and a circle around a wall would either swallow the
+corridor or miss the wall's ends. A wall point has radius 0, so the robot keeps D = r_R + d0 + margin from the wall
+surface; between two points wall_spacing_m apart the clearance loses at most D - sqrt(D^2 - (spacing/2)^2) (about
+1.5 cm for D = 0.35 m and 0.2 m spacing). Nearest first with a cap keeps the QP small where it matters: around the
+robot, on every nearby wall (each wall cluster contributes its nearest point).
+
+Limitations (documented choices): a scan is taken as instantaneous (no per-beam motion correction); wall points come
+from the current scan only (no map); an object closer than the breakpoint distance (~0.2-0.3 m at 2 m) to a wall or
+to another object merges with it into one cluster for those scans (its track coasts, the merged returns are wall
+points); a moving pedestrian is reported static (v = 0) until its speed has exceeded v_dynamic_mps for n_dynamic
+updates.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..params.perception import PerceptionParams
+from ..types import LaserScan, Obstacles
+from .geometry import (cluster_points, extent, measure_compact, scan_to_points, select_wall_points,
+                       wall_candidates)
+from .tracker import Tracker
+
+
+def wall_obstacles(points: np.ndarray, cov_m2: float) -> Obstacles:
+    """Wall points as obstacles: ids -1, radius 0, zero velocity, static, covariance cov_m2 I."""
+    m = len(points)
+    cov = np.broadcast_to(cov_m2 * np.eye(2), (m, 2, 2)).copy()
+    return Obstacles(np.asarray(points, float).reshape(m, 2), np.zeros((m, 2)), cov, np.zeros(m),
+                     np.ones(m, bool), np.full(m, -1, int))
+
+
+class Perception:
+    """Obstacle estimates from LiDAR scans and odometry (module docstring). Not thread-safe; one per robot."""
+
+    def __init__(self, params: PerceptionParams = PerceptionParams()):
+        self.params = params
+        self.tracker = Tracker(params)
+        self._last_ms = 0.0
+        self._stamp: float | None = None
+        #: The wall points of the last update (odom), for debugging and visualisation.
+        self.last_wall_points = np.zeros((0, 2))
+
+    def reset(self) -> None:
+        """Forget every track (ids restart at 0)."""
+        self.tracker.reset()
+        self._stamp = None
+        self._last_ms = 0.0
+        self.last_wall_points = np.zeros((0, 2))
+
+    @property
+    def last_ms(self) -> float:
+        """Wall-clock time of the last ``update`` [ms]."""
+        return self._last_ms
+
+    def _grazing(self, pts: np.ndarray, ranges: np.ndarray, angle_increment: float) -> bool:
+        """Median spacing of consecutive points above grazing_spacing_factor beam spacings at the mean range."""
+        step = np.diff(pts, axis=0)
+        gaps = np.sqrt(step[:, 0] ** 2 + step[:, 1] ** 2)
+        spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])        # (upper) median
+        return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
+
+    def update(self, scan: LaserScan, pose: tuple[float, float, float]) -> Obstacles:
+        """Process one scan taken at ``scan.stamp`` [s] with the robot at ``pose`` = (x [m], y [m], theta [rad]) in
+        odom at that stamp; returns the obstacle estimates in odom (tracks, then wall points)."""
+        t0 = time.perf_counter()
+        pr = self.params
+        if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+            raise ValueError(f"pose must be three finite numbers (x, y, theta), got {pose!r}")
+        if not math.isfinite(scan.stamp):
+            raise ValueError(f"scan stamp must be finite, got {scan.stamp!r}")
+        if np.ndim(scan.ranges) != 1 or not scan.angle_increment > 0:
+            raise ValueError("scan needs a 1-D ranges array and angle_increment > 0")
+        if self._stamp is not None and scan.stamp < self._stamp:
+            raise ValueError(f"scan stamp {scan.stamp} is before the previous one {self._stamp}; call reset() first")
+        self._stamp = float(scan.stamp)
+        robot = np.array([float(pose[0]), float(pose[1])])
+
+        sp = scan_to_points(scan, pose, pr)
+        centers, radii, walls, compact = [], [], [], []
+        for cl in cluster_points(sp, pr):
+            pts = sp.xy[cl.idx]
+            if len(cl.idx) < pr.min_points or extent(pts, pr.compact_max_extent_m) > pr.compact_max_extent_m:
+                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
+                continue
+            meas = measure_compact(pts, sp.sensor, pr, cl.occluded, sp.angle_increment)
+            if not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)):
+                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
+                continue
+            centers.append(meas.center)
+            radii.append(meas.radius)
+            compact.append(pts)
+        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot)
+        walls += [wall_candidates(compact[k], robot, pr.wall_spacing_m) for k in rejected]
+        wall_pts = select_wall_points(np.concatenate(walls) if walls else np.zeros((0, 2)), robot, pr)
+        self.last_wall_points = wall_pts
+        out = self.tracker.obstacles(robot).concat(wall_obstacles(wall_pts, pr.wall_cov_m2))
+        self._last_ms = 1e3 * (time.perf_counter() - t0)
+        return out

@@ -1,0 +1,156 @@
+"""Multi-object tracker: gating, assignment, track birth / confirmation / coasting / deletion, one CV Kalman filter
+per track, static/dynamic hysteresis. Tracks are kept as arrays (a few dozen at most).
+
+Life of a track:
+* born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
+  split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
+* CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
+* a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
+  pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted;
+* at most max_candidates tracks are kept (the farthest are dropped); the output is the max_tracks confirmed tracks
+  nearest to the robot (distance to their surface, |p - p_robot| - r).
+Association: cost = Euclidean distance between the predicted centre and a cluster centre; a pair is allowed when
+its Mahalanobis distance squared (innovation covariance S = P_pos + R) is below gate_chi2 or its distance is below
+gate_min_m, never beyond gate_max_m, and only when the cluster's radius is within gate_radius_m of the track's (two
+objects merged into one cluster, e.g. a pedestrian passing a post, must not drag the post's track); the assignment
+minimising the total cost is scipy's linear_sum_assignment.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..params.perception import PerceptionParams
+from ..types import Obstacles
+from .classify import hysteresis_step, speed_sigma
+from .kalman import kf_predict, kf_update, mahalanobis2
+
+_INFEASIBLE = 1e9
+
+_FIELDS = ("x", "P", "ids", "r", "hits", "misses", "confirmed", "static", "n_dyn", "n_stat", "last_hit")
+
+
+class Tracker:
+    """Tracks of compact objects in odom (see the module docstring)."""
+
+    def __init__(self, params: PerceptionParams = PerceptionParams()):
+        self.params = params
+        self.reset()
+
+    def reset(self) -> None:
+        self.t: float | None = None
+        self.next_id = 0
+        self.x = np.zeros((0, 4))
+        self.P = np.zeros((0, 4, 4))
+        self.ids = np.zeros(0, int)
+        self.r = np.zeros(0)
+        self.hits = np.zeros(0, int)
+        self.misses = np.zeros(0, int)
+        self.confirmed = np.zeros(0, bool)
+        self.static = np.zeros(0, bool)
+        self.n_dyn = np.zeros(0, int)
+        self.n_stat = np.zeros(0, int)
+        self.last_hit = np.zeros(0)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def _keep(self, mask: np.ndarray) -> None:
+        for name in _FIELDS:
+            setattr(self, name, getattr(self, name)[mask])
+
+    def _append(self, z: np.ndarray, r: np.ndarray, t: float) -> None:
+        m = len(z)
+        pr = self.params
+        x = np.hstack([z, np.zeros((m, 2))])
+        P = np.zeros((m, 4, 4))
+        P[:, 0, 0] = P[:, 1, 1] = pr.meas_sigma_m ** 2
+        P[:, 2, 2] = P[:, 3, 3] = pr.init_vel_sigma_mps ** 2
+        new = dict(x=x, P=P, ids=self.next_id + np.arange(m), r=np.asarray(r, float), hits=np.ones(m, int),
+                   misses=np.zeros(m, int), confirmed=np.full(m, pr.confirm_hits <= 1), static=np.ones(m, bool),
+                   n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t))
+        self.next_id += m
+        for name in _FIELDS:
+            setattr(self, name, np.concatenate([getattr(self, name), new[name]]))
+
+    def predict(self, t: float) -> None:
+        """Propagate every track to time t (constant velocity, Eq. (2); covariance grows)."""
+        if self.t is not None and len(self) and t > self.t:
+            self.x, self.P = kf_predict(self.x, self.P, t - self.t, self.params.accel_psd_m2ps3)
+        self.t = t
+
+    def associate(self, z: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,), gated
+        (module docstring)."""
+        n, m = len(self), len(z)
+        if n == 0 or m == 0:
+            return np.zeros(0, int), np.zeros(0, int)
+        pr = self.params
+        y = z[None, :, :] - self.x[:, None, :2]                              # (n, m, 2)
+        dist = np.linalg.norm(y, axis=2)
+        S = self.P[:, None, :2, :2] + pr.meas_sigma_m ** 2 * np.eye(2)
+        d2 = mahalanobis2(y, S)
+        ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
+        ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
+        cost = np.where(ok, dist, _INFEASIBLE)
+        rows, cols = linear_sum_assignment(cost)
+        good = ok[rows, cols]
+        return rows[good], cols[good]
+
+    def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray) -> np.ndarray:
+        """One scan: predict to t, associate cluster centres z (M,2) with radii (M,), update, birth, delete.
+
+        Returns the indices of the measurements that neither updated a track nor started one (a cluster inside a
+        known object's circle whose radius does not match it, e.g. two objects merged into one cluster)."""
+        pr = self.params
+        z = np.asarray(z, float).reshape(-1, 2)
+        radii = np.asarray(radii, float).reshape(-1)
+        self.predict(t)
+        rows, cols = self.associate(z, radii)
+        if len(rows):
+            x, P = kf_update(self.x[rows], self.P[rows], z[cols], pr.meas_sigma_m ** 2)
+            self.x[rows], self.P[rows] = x, P
+            a = pr.radius_smoothing
+            self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
+            self.hits[rows] += 1
+            self.misses[rows] = 0
+            self.last_hit[rows] = t
+            self.confirmed[rows] |= self.hits[rows] >= pr.confirm_hits
+            v = x[:, 2:]
+            st, nd, ns = hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
+                                         np.linalg.norm(v, axis=1), speed_sigma(v, P[:, 2:, 2:]), pr)
+            self.static[rows], self.n_dyn[rows], self.n_stat[rows] = st, nd, ns
+        missed = np.ones(len(self), bool)
+        missed[rows] = False
+        self.misses[missed] += 1
+        alive = np.where(self.confirmed, t - self.last_hit <= pr.coast_s + 1e-9,
+                         self.misses <= pr.tentative_max_misses)
+        self._keep(alive)
+        # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
+        free = np.ones(len(z), bool)
+        free[cols] = False
+        rejected = np.zeros(len(z), bool)
+        if free.any() and len(self):
+            d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
+            rejected = free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
+            free &= ~rejected
+        if free.any():
+            self._append(z[free], radii[free], t)
+        if len(self) > pr.max_candidates:
+            keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
+            self._keep(np.sort(keep))
+        return np.flatnonzero(rejected)
+
+    def surface_distance(self, robot_xy: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(self.x[:, :2] - robot_xy, axis=1) - self.r
+
+    def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
+        """The confirmed tracks, at most max_tracks, nearest first (surface distance). Static tracks have v = 0."""
+        idx = np.flatnonzero(self.confirmed)
+        if len(idx) == 0:
+            return Obstacles.empty()
+        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")][: self.params.max_tracks]
+        v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
+        return Obstacles(self.x[order, :2].copy(), v, self.P[order, :2, :2].copy(), self.r[order].copy(),
+                         self.static[order].copy(), self.ids[order].copy())
+
