@@ -9,6 +9,8 @@ HELP = "measure speed: physics, LiDAR, perception, planners, CBF-QP, episodes (p
 #: Benchmark providers: "module:function" -> function(quick: bool) -> dict of figures.
 BENCHES = [
     "bigcbf.sim.perf:bench",
+    "bigcbf.perception.perf:bench",
+    "bigcbf.control.perf:bench",
 ]
 
 

@@ -1,0 +1,177 @@
+"""The six feedback behaviors of BIG-CBF and the reverse-release fallback (Eqs. 5-8).
+
+Modes: GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD (the behavior set B), plus REVERSE, the fallback used when
+every regular behavior is rejected. A policy maps (robot position, obstacles, goal) to a world-frame
+translational velocity v_b (Eq. 8); the body command is u = [R(theta)^T v_b, 0]: the behaviors are purely
+translational (holonomic base, 360 degree LiDAR), yaw is not commanded.
+
+Choices the paper leaves open (documented here, parameters in StackParams):
+
+* Locally relevant obstacle i of Eq. (7): seen from the robot along the goal direction d_g, with along-track
+  distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest s_i)
+  obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead
+  (s_i - r_i < ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + d_pass_min, i.e. driving straight
+  to the goal would bring the footprint closer than d0 + d_pass_min to it. Wall points (radius 0) take part like
+  any obstacle.
+* d_pass of Eq. (7), per side sigma: the lateral shift that puts the robot's footprint, with the base clearance,
+  beside the relevant obstacle on side sigma, d_pass = max(d_pass_min, sigma c_i + r_R + r_i + d0). For an
+  obstacle dead ahead (c_i = 0) Eq. (7)'s own floor r_R + r_i + 0.35 dominates; for an obstacle offset towards
+  side sigma, d_pass widens the detour on that side.
+* Without a relevant obstacle there is nothing to pass: PASS-sigma keeps only its goal-directed component
+  (g = p + 0.85 d_g), so a robot that has completed a pass heads for the goal instead of drifting sideways; a
+  PASS mode and GOAL then differ only near the goal, where the selection prefers GOAL (PASS overshoots).
+* YIELD (zero command) is a candidate only while a dynamic obstacle is tracked ("YIELD intentionally suppresses
+  movement when dynamic obstacles are present"); in a static scene standing still would never resolve anything.
+* Inside the goal region (Eq. 5 of Sec. II, ||p - p_g|| <= eps_g) every policy commands zero.
+* REVERSE (reverse-release fallback): move at ``v_release_mps`` away from the obstacles closer than
+  r_R + r_i + d0 + ``release_range_m``, weighted by how deep they are inside that range; if none is that close
+  (or their pushes cancel), straight back away from the goal.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..params.stack import StackParams
+from ..types import Obstacles, RobotState
+
+BEHAVIORS: tuple[str, ...] = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")
+REVERSE = "REVERSE"
+MODES: tuple[str, ...] = BEHAVIORS + (REVERSE,)
+MODE_INDEX = {m: i for i, m in enumerate(MODES)}
+
+# Eq. (7) coefficients per mode index (GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD, REVERSE)
+FORWARD_M = np.array([0.0, 0.85, 0.85, 0.45, 0.45, 0.0, 0.0])   # along d_g [m]
+SIGMA = np.array([0.0, 1.0, -1.0, 1.0, -1.0, 0.0, 0.0])         # +1 left, -1 right
+IS_GOAL = np.array([True, False, False, False, False, False, False])
+IS_PASS = np.array([False, True, True, False, False, False, False])
+IS_SIDE = np.array([False, False, False, True, True, False, False])
+SIDE_LATERAL_M = 0.80          # Eq. (7) SIDE lateral offset [m]
+PASS_EXTRA_M = 0.35            # Eq. (7) PASS floor r_R + r_i + 0.35 [m]
+GAIN_NEAR_PER_S = 2.0          # Eq. (8) (2 1/s) ||e_b||
+GAIN_LIN_PER_S = 0.35          # Eq. (8) (0.35 1/s) e_b
+_TINY = 1e-12
+
+
+def speed_limits(params: StackParams) -> np.ndarray:
+    """v_b^max per mode index [m/s] (Eq. 8): 0.8 for GOAL/PASS, 0.55 for SIDE, 0 for YIELD, release speed."""
+    v, vs = params.v_max_mps, params.v_side_mps
+    return np.array([v, v, v, vs, vs, 0.0, params.v_release_mps])
+
+
+def mode_indices(modes) -> np.ndarray:
+    return np.array([MODE_INDEX[m] for m in modes], dtype=int)
+
+
+def goal_basis(p, goal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. (6): d_g = (p_g - p)/||p_g - p||, n_g = [-d_g,y, d_g,x] (left normal). Returns d_g, n_g (..., 2) and
+    the distance ||p_g - p|| (...). At the goal itself d_g = 0."""
+    e = np.asarray(goal, float) - np.asarray(p, float)
+    dist = np.hypot(e[..., 0], e[..., 1])
+    d = e / np.maximum(dist, _TINY)[..., None]
+    n = np.stack([-d[..., 1], d[..., 0]], -1)
+    return d, n, dist
+
+
+def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams):
+    """The locally relevant obstacle of Eq. (7) for each row (see the module docstring).
+
+    p, d_g, n_g (B, 2); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none, c_i (B,), r_i (B,)),
+    c_i and r_i being 0 where there is none.
+    """
+    p = np.atleast_2d(np.asarray(p, float))
+    B, M = len(p), len(obs_r)
+    if M == 0:
+        return np.full(B, -1), np.zeros(B), np.zeros(B)
+    unc = params.uncertainty
+    rel = np.asarray(obs_p, float)[None, :, :] - p[:, None, :]
+    s = rel[..., 0] * d_g[:, None, 0] + rel[..., 1] * d_g[:, None, 1]
+    c = rel[..., 0] * n_g[:, None, 0] + rel[..., 1] * n_g[:, None, 1]
+    r = np.asarray(obs_r, float)[None, :]
+    relevant = ((s > -(unc.r_robot_m + r)) & (s - r < params.relevant_range_m)
+                & (np.abs(c) < unc.r_robot_m + r + unc.d0_m + params.d_pass_min_m))
+    key = np.where(relevant, s, np.inf)
+    j = np.argmin(key, axis=1)
+    rows = np.arange(B)
+    has = np.isfinite(key[rows, j])
+    return np.where(has, j, -1), np.where(has, c[rows, j], 0.0), np.where(has, r[0, j], 0.0)
+
+
+def pass_offset(sigma, c_rel, r_rel, has_rel, params: StackParams) -> np.ndarray:
+    """Eq. (7) lateral PASS offset max(d_pass, r_R + r_i + 0.35) [m], with d_pass = max(d_pass_min,
+    sigma c_i + r_R + r_i + d0) for a relevant obstacle (c_i its cross-track offset); 0 without one."""
+    unc = params.uncertainty
+    d_pass = np.maximum(params.d_pass_min_m, sigma * c_rel + unc.r_robot_m + r_rel + unc.d0_m)
+    return np.where(has_rel, np.maximum(d_pass, unc.r_robot_m + r_rel + PASS_EXTRA_M), 0.0)
+
+
+def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+    """Eq. (7): e_b = g_b - p (B, 2) for each row's mode:
+    GOAL p_g - p; PASS-sigma 0.85 d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a relevant
+    obstacle); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
+    YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)"""
+    mode_idx = np.asarray(mode_idx, int)
+    p = np.atleast_2d(np.asarray(p, float))
+    d_g, n_g, _ = goal_basis(p, goal)
+    sigma = SIGMA[mode_idx]
+    lateral = np.where(IS_SIDE[mode_idx], SIDE_LATERAL_M * sigma, 0.0)
+    if np.any(IS_PASS[mode_idx]):
+        j, c_rel, r_rel = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params)
+        lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(sigma, c_rel, r_rel, j >= 0, params), lateral)
+    e = FORWARD_M[mode_idx, None] * d_g + lateral[:, None] * n_g
+    return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
+
+
+def feedback_velocity(e, v_max) -> np.ndarray:
+    """Eq. (8): v_b = sat_{v_max}[ e/||e|| min(v_max, 2||e||) + 0.35 e ] (world frame, m/s).
+
+    Both terms are parallel to e, so v_b = e/||e|| min(v_max, min(v_max, 2||e||) + 0.35||e||). e (B, 2), v_max (B,).
+    """
+    e = np.atleast_2d(np.asarray(e, float))
+    n = np.hypot(e[:, 0], e[:, 1])
+    v_max = np.asarray(v_max, float)
+    mag = np.minimum(np.minimum(v_max, GAIN_NEAR_PER_S * n) + GAIN_LIN_PER_S * n, v_max)
+    return e * (mag / np.maximum(n, _TINY))[:, None]
+
+
+def release_velocity(p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+    """The reverse-release fallback velocity (B, 2) [m/s] (see the module docstring)."""
+    p = np.atleast_2d(np.asarray(p, float))
+    unc = params.uncertainty
+    d_g, _, _ = goal_basis(p, goal)
+    push = np.zeros_like(p)
+    if len(obs_r):
+        q = p[:, None, :] - np.asarray(obs_p, float)[None]
+        dist = np.hypot(q[..., 0], q[..., 1])
+        w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m - dist, 0.0)
+        push = np.sum((w / np.maximum(dist, _TINY))[..., None] * q, axis=1)
+    n = np.hypot(push[:, 0], push[:, 1])
+    direction = np.where((n > 1e-9)[:, None], push / np.maximum(n, _TINY)[:, None], -d_g)
+    return params.v_release_mps * direction
+
+
+def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+    """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (Eqs. 6-8), zero inside the
+    goal region; REVERSE rows use the fallback."""
+    mode_idx = np.asarray(mode_idx, int)
+    p = np.atleast_2d(np.asarray(p, float))
+    v = feedback_velocity(subgoal_error(mode_idx, p, goal, obs_p, obs_r, params), speed_limits(params)[mode_idx])
+    is_rev = mode_idx == MODE_INDEX[REVERSE]
+    if np.any(is_rev):
+        v = np.where(is_rev[:, None], release_velocity(p, goal, obs_p, obs_r, params), v)
+    dist = np.hypot(*(np.asarray(goal, float) - p).T)
+    return np.where((dist > params.eps_g_m)[:, None], v, 0.0)
+
+
+def body_command(theta, v_world) -> np.ndarray:
+    """u = [R(theta)^T v, 0] (B, 3): the body twist realizing a world-frame velocity (yaw not commanded)."""
+    v = np.atleast_2d(np.asarray(v_world, float))
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], np.zeros(len(v))], -1)
+
+
+def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams) -> np.ndarray:
+    """Eq. (5): u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest estimates (3,)."""
+    if mode not in MODE_INDEX:
+        raise ValueError(f"unknown behavior mode {mode!r}; known: {', '.join(MODES)}")
+    v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params)
+    return body_command(np.array([state.theta]), v)[0]

@@ -1,0 +1,69 @@
+"""The BIG-CBF planner (and its NoShared ablation): behavior selection every T_B, the selected feedback policy
+regenerated at every control tick (Eq. 5). Its u_in goes to the common CbfFilter."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..params.stack import StackParams
+from ..types import Obstacles, RobotState
+from .behaviors import REVERSE, behavior_command
+from .imagination import Imagination, imagine, rollout_paths
+from .planner import PlanInfo
+from .selection import BehaviorSelector, Selection
+
+_T_EPS = 1e-6   # tolerance of the selection clock [s] (control ticks are floats)
+
+
+class BigCbfPlanner:
+    """BIG-CBF (``shared=True``) or BIG-CBF-NoShared (``shared=False``: the imagination uses a fixed
+    ``noshared_margin_m`` instead of kappa_img m_i). Deterministic: ``reset(seed)`` ignores the seed.
+
+    The first call selects; later selections happen on the grid t_0 + n T_B (with a tolerance for float
+    clocks). ``last_imagination`` and ``last_selection`` keep the latest cycle for inspection.
+    """
+
+    def __init__(self, params: StackParams, *, shared: bool = True):
+        self.params = params
+        self.shared = shared
+        self.name = "big-cbf" if shared else "big-cbf-noshared"
+        self.selector = BehaviorSelector(params)
+        self.reset(0)
+
+    def reset(self, seed: int) -> None:
+        self.selector.reset()
+        self._next_t: float | None = None
+        self._path: np.ndarray | None = None
+        self.last_imagination: Imagination | None = None
+        self.last_selection: Selection | None = None
+
+    @property
+    def mode(self) -> str | None:
+        return self.selector.mode
+
+    def select(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> Selection:
+        """One behavior-selection cycle (Eqs. 9, 10, 16, 17): imagine, score, select; keeps only the mode."""
+        p = self.params
+        img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode)
+        sel = self.selector.select(t, img)
+        if sel.mode == REVERSE:     # the fallback is no candidate: roll it out only when it is used
+            self._path = rollout_paths(state, obstacles, goal, p, (REVERSE,))[0]
+        else:
+            self._path = img.p[img.index(sel.mode)]
+        self.last_imagination, self.last_selection = img, sel
+        return sel
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        goal = np.asarray(goal, float).reshape(2)
+        planned = self._next_t is None or t >= self._next_t - _T_EPS
+        if planned:
+            self.select(t, state, obstacles, goal)
+            nxt = t if self._next_t is None else self._next_t
+            while nxt <= t + _T_EPS:
+                nxt += self.params.T_B_s
+            self._next_t = nxt
+        mode = self.selector.mode
+        u = behavior_command(mode, state, obstacles, goal, self.params)     # Eq. (5)
+        return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path)

@@ -1,0 +1,284 @@
+"""Closed-loop behavior imagination and scoring (Eqs. 9, 10, 16, 17), vectorized over behaviors and obstacles.
+
+For every candidate b the imagined robot starts at the current state; at each step k = 0..N-1 the command
+u_k^b = pi_b(x_k^b, O^k, p_g) is regenerated from the imagined state and the predicted obstacles (Eq. 9), the
+robot is propagated over dt with the nominal execution model of Eq. (1) (A, d; the bounded residual r is
+unknown and enters only the uncertainty radius through e_exec), and the obstacles follow Eqs. (2)-(3).
+
+Commands exist for k = 0..N-1 (as in the paper's sums); the barrier test (Eq. 16) takes the minimum over the
+states k = 0..N and all obstacles, the terminal state's m_i (Eq. 15) using the last command u_{N-1}, the one
+that brought the robot there. A robot already deeper than eps_h inside an inflated radius therefore rejects
+every behavior and triggers the reverse-release fallback.
+
+Freezing (F of Eq. 10) counts the steps with ||u_xy|| < v_freeze taken *outside* the goal region: standing
+still at the goal is the objective, not the "persistent stagnation" F is meant to penalize (without this, every
+behavior that arrives within the horizon would be penalized against ones that circle the goal).
+
+The loop body inlines the formulas of ``behaviors`` and ``uncertainty`` (one numpy op per term over (B, M)
+arrays, no per-behavior Python); tests check it against a per-behavior reference built from those modules.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params.stack import StackParams
+from ..types import Obstacles, RobotState
+from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
+                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, mode_indices, speed_limits)
+from .prediction import predict_obstacles, q_sigma_for
+from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
+
+_TINY = 1e-12
+
+
+@dataclass
+class Imagination:
+    """The rollouts and scores of one behavior-selection cycle (row b = ``modes[b]``)."""
+
+    modes: tuple[str, ...]
+    p: np.ndarray          # (B, N+1, 2) imagined positions [m]
+    theta: np.ndarray      # (B, N+1) imagined yaw [rad]
+    u: np.ndarray          # (B, N, 3) regenerated commands u_k, k = 0..N-1
+    h_min: np.ndarray      # (B,) min over k = 0..N and i of h^img [m^2] (+inf without obstacles)
+    W: np.ndarray          # (B,) W~ of Eq. (17)
+    P: np.ndarray          # (B,) progress [m] (Eq. 10)
+    F: np.ndarray          # (B,) freezing fraction (Eq. 10)
+    S: np.ndarray          # (B,) smoothness (Eq. 10)
+    C_sw: np.ndarray       # (B,) switching indicator (Eq. 10)
+    J: np.ndarray          # (B,) cost of Eq. (10)
+    available: np.ndarray  # (B,) bool: a candidate (YIELD needs a dynamic obstacle; REVERSE never is one)
+    accepted: np.ndarray   # (B,) bool: available and passes the barrier test of Eq. (16)
+
+    def index(self, mode: str) -> int:
+        return self.modes.index(mode)
+
+
+def _real_linear_as_complex(M2) -> tuple[complex, complex]:
+    """A real 2x2 map as z -> a z + b conj(z) (z = x + i y)."""
+    a = complex(M2[0, 0] + M2[1, 1], M2[1, 0] - M2[0, 1]) / 2
+    b = complex(M2[0, 0] - M2[1, 1], M2[1, 0] + M2[0, 1]) / 2
+    return a, b
+
+
+class _Constants:
+    """Per (modes, params) constants of the rollout (Eqs. 1, 7, 8), cached."""
+
+    def __init__(self, modes: tuple[str, ...], params: StackParams):
+        ex = params.uncertainty.execution
+        midx = mode_indices(modes)
+        self.B = len(midx)
+        self.sigma = SIGMA[midx]
+        self.goal_f = IS_GOAL[midx].astype(float)
+        self.pass_f = IS_PASS[midx].astype(float)
+        self.any_pass = bool(self.pass_f.any())
+        fwd_c = FORWARD_M[midx] * (1.0 - self.goal_f)                      # along d_g, 0 for GOAL rows
+        side_lat = np.where(IS_SIDE[midx], SIDE_LATERAL_M * self.sigma, 0.0)
+        self.coef0 = fwd_c + 1j * side_lat         # e_b = d_g (fwd + i lat) for PASS/SIDE/YIELD rows (Eq. 7)
+        self.pass_sig_j = 1j * self.pass_f * self.sigma
+        self.goal_rows = np.flatnonzero(self.goal_f).tolist()
+        self.vmax = speed_limits(params)[midx]
+        self.is_rev = midx == MODE_INDEX[REVERSE]
+        self.any_rev = bool(self.is_rev.any())
+        # execution model, Eq. (1): body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
+        A = np.asarray(ex.A, float)
+        self.A = A
+        self.a_c, self.b_c = _real_linear_as_complex(A[:2, :2])
+        self.d_c = complex(ex.d[0], ex.d[1])
+        self.ideal_xy = self.a_c == 1 and self.b_c == 0 and self.d_c == 0
+        self.a20, self.a21, self.dw = float(A[2, 0]), float(A[2, 1]), float(ex.d[2])
+        self.turning = not (self.a20 == 0 and self.a21 == 0 and self.dw == 0)
+        self.unit_gradient = bool(np.allclose(A[:2] @ A[:2].T, np.eye(2)))   # ||A_xy^T R^T q|| = ||q||
+
+
+_CONSTANTS: dict[tuple, tuple[StackParams, _Constants]] = {}
+
+
+def _constants(modes: tuple[str, ...], params: StackParams) -> _Constants:
+    key = (tuple(modes), id(params))
+    hit = _CONSTANTS.get(key)
+    if hit is None or hit[0] is not params:
+        if len(_CONSTANTS) > 64:
+            _CONSTANTS.clear()
+        hit = (params, _Constants(tuple(modes), params))
+        _CONSTANTS[key] = hit
+    return hit[1]
+
+
+@dataclass
+class _Rollout:
+    K: "_Constants"
+    P: np.ndarray               # (B, N+1) complex positions
+    V: np.ndarray               # (B, N+1) complex nominal realized velocities (column N repeats N-1)
+    U: np.ndarray               # (B, N+1) complex body commands (column N repeats N-1)
+    TH: np.ndarray              # (B, N+1) yaw
+    Oc: np.ndarray | None       # (N+1, M) complex predicted obstacle positions
+    cov: np.ndarray | None      # (N+1, M, 2, 2) predicted covariances
+
+
+def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...]) -> _Rollout:
+    """Eq. (9): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot propagated with
+    the nominal Eq. (1), obstacles with Eqs. 2-3). Planar vectors are complex numbers (x + i y; R(theta) is
+    multiplication by e^{i theta}); all behaviors advance together, one numpy op per term and step."""
+    unc = params.uncertainty
+    N, dt = params.N, params.dt_s
+    K = _constants(modes, params)
+    B, M = K.B, len(obstacles)
+    goal = np.asarray(goal, float)
+    pg = complex(goal[0], goal[1])
+    rR, d0 = unc.r_robot_m, unc.d0_m
+    sigma, any_pass, vmax, is_rev, any_rev = K.sigma, K.any_pass, K.vmax, K.is_rev, K.any_rev
+    a_c, b_c, d_c, ideal_xy, a20, a21, dw, turning = K.a_c, K.b_c, K.d_c, K.ideal_xy, K.a20, K.a21, K.dw, K.turning
+
+    # ---- obstacles: predictions (Eqs. 2-4)
+    Oc = cov = None
+    if M:
+        P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, unc))
+        Oc = P_obs[..., 0] + 1j * P_obs[..., 1]                       # (N+1, M)
+        r = np.asarray(obstacles.r, float)
+        base = rR + r + d0                                            # r_R + r_i + d0  (M,)
+        cand_lo, cand_hi = -(rR + r), params.relevant_range_m + r
+        corridor = base + params.d_pass_min_m
+        release_reach = base + params.release_range_m
+        flat_rows = np.arange(B) * M
+
+    p = np.full(B, complex(state.px, state.py))
+    th = np.full(B, float(state.theta))
+    rot = np.exp(1j * th)
+    conj_rot = np.conj(rot)
+    # (N+1, B) layouts: one contiguous row per step
+    Pk = np.empty((N + 1, B), complex)     # imagined positions
+    Vk = np.empty((N + 1, B), complex)     # nominal realized velocities (odom); row N repeats row N-1
+    Uk = np.empty((N + 1, B), complex)     # body commands u_x + i u_y (u_w = 0); row N repeats row N-1
+    THk = np.empty((N + 1, B))
+    THk[:] = th
+    d_min, v_rel, eps_g = params.d_pass_min_m, params.v_release_mps, params.eps_g_m
+    coef0, pass_sig_j, goal_rows = K.coef0, K.pass_sig_j, K.goal_rows
+    gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
+    if M:
+        pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
+
+    for k in range(N):
+        Pk[k] = p
+        # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
+        g = pg - p
+        dist = np.abs(g)
+        dg = g / np.maximum(dist, _TINY)
+        coef = coef0
+        if any_pass and M:
+            z = (Oc[k] - p[:, None]) * np.conj(dg)[:, None]             # s_i + i c_i (B, M)
+            s = z.real
+            key = np.where((s > cand_lo) & (s < cand_hi) & (np.abs(z.imag) < corridor), s, np.inf)
+            j = key.argmin(axis=1)
+            flat = flat_rows + j
+            has = key.ravel()[flat] < np.inf
+            off = has * np.maximum(np.maximum(d_min, sigma * z.ravel()[flat].imag + base[j]), pass_floor[j])
+            coef = coef0 + pass_sig_j * off
+        e = dg * coef
+        for gr in goal_rows:
+            e[gr] = g[gr]
+        # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
+        v = e * np.minimum(gain, vmax * (dist > eps_g) / np.maximum(np.abs(e), _TINY))
+        if any_rev:                                                   # reverse-release fallback rows
+            push = 0j
+            if M:
+                qz = p[:, None] - Oc[k]
+                qd = np.abs(qz)
+                w = np.maximum(release_reach - qd, 0.0)
+                push = (w / np.maximum(qd, _TINY) * qz).sum(axis=1)
+            npush = np.abs(push)
+            vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * (dist > eps_g)
+            v = np.where(is_rev, vr, v)
+        u = v * conj_rot
+        Uk[k] = u
+        # nominal execution (Eq. 1) and propagation over dt
+        vreal = v if ideal_xy else rot * (a_c * u + b_c * np.conj(u) + d_c)
+        Vk[k] = vreal
+        p = p + dt * vreal
+        if turning:
+            th = th + dt * (a20 * u.real + a21 * u.imag + dw)
+            THk[k + 1] = th
+            rot = np.exp(1j * th)
+            conj_rot = np.conj(rot)
+    Pk[N] = p
+    Uk[N] = u = Uk[N - 1]
+    Vk[N] = rot * (a_c * u + b_c * np.conj(u) + d_c)       # u_{N-1} realized at the terminal yaw
+
+    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov)
+
+
+def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
+                  modes: tuple[str, ...]) -> np.ndarray:
+    """The imagined positions (B, N+1, 2) of ``modes`` (Eq. 9), without scoring (e.g. the fallback's path)."""
+    ro = _rollout(state, obstacles, np.asarray(goal, float), params, tuple(modes))
+    return np.stack([ro.P.real, ro.P.imag], -1)
+
+
+def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
+            modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None) -> Imagination:
+    """Eq. (9) rollouts of ``modes`` from ``state`` and their scores (Eqs. 10, 16, 17).
+
+    ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
+    ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0).
+
+    The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
+    shot over (behaviors, steps, obstacles).
+    """
+    unc, ex = params.uncertainty, params.uncertainty.execution
+    N = params.N
+    goal = np.asarray(goal, float)
+    pg = complex(goal[0], goal[1])
+    ro = _rollout(state, obstacles, goal, params, tuple(modes))
+    K, Pc, Vc, Uc, TH, Oc, cov = ro.K, ro.P, ro.V, ro.U, ro.TH, ro.Oc, ro.cov
+    B, M = K.B, len(obstacles)
+    A, unit_gradient = K.A, K.unit_gradient
+    if M:
+        Ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]               # (M,)
+        base = unc.r_robot_m + np.asarray(obstacles.r, float) + unc.d0_m   # r_R + r_i + d0  (M,)
+    U = np.zeros((B, N, 3))
+    U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
+    speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
+
+    # ---- shared barrier (Eqs. 14-16) and analytic compatibility W~ (Eq. 17), all (b, k, i) at once
+    W = np.zeros(B)
+    h_min = np.full(B, np.inf)
+    if M:
+        q = Pc[:, :, None] - Oc[None]                                  # q_i = p - p_i (B, N+1, M)
+        q2 = q.real ** 2 + q.imag ** 2
+        relv = Vc[:, :, None] - Ov                                     # R(A u + d) - v_i
+        if shared:
+            kap = kappa_img(obstacles, unc)
+            e_ex = ex.residual_horizon_s * np.interp(speed, ex.residual_speed_mps, ex.residual_bound_mps)
+            m = (unc.tau95_s * np.abs(relv) + (unc.beta * np.sqrt(lambda_max_2x2(cov)))[None]
+                 + (e_ex + unc.e_zoh_m)[:, :, None])                   # Eq. (15)
+            D = base + kap * m
+        else:
+            D = base + params.noshared_margin_m
+        h = q2 - D * D
+        h_min = h.reshape(B, -1).min(axis=1)
+        qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
+        gamma = 2.0 * (qn.real * rn.real + qn.imag * rn.imag) + params.alpha_per_s * hn
+        # |grad_u gamma|^2 = 4 ||A_xy^T R^T q||^2 (A_xy = translational rows of A, all three u channels)
+        if unit_gradient:
+            grad2 = 4.0 * q2[:, :N]
+        else:
+            qb = qn * np.exp(-1j * TH[:, :N])[:, :, None]              # R^T q
+            G = A[:2] @ A[:2].T
+            grad2 = 4.0 * (G[0, 0] * qb.real ** 2 + 2 * G[0, 1] * qb.real * qb.imag + G[1, 1] * qb.imag ** 2)
+        viol = np.maximum(-gamma, 0.0)
+        W = (viol * viol / (grad2 + params.w_eps)).reshape(B, -1).sum(axis=1)
+
+    # ---- scores (Eq. 10)
+    P_hist = np.stack([Pc.real, Pc.imag], -1)
+    Pr = abs(pg - complex(state.px, state.py)) - np.abs(pg - Pc[:, N])
+    outside = np.abs(pg - Pc[:, :N]) > params.eps_g_m      # standing still inside the goal region is arrival
+    F = np.mean((speed[:, :N] < params.v_freeze_mps) & outside, axis=1)
+    dU = np.diff(Uc[:, :N], axis=1)
+    S = np.sum(dU.real ** 2 + dU.imag ** 2, axis=1) + speed[:, 0] ** 2   # u_w = 0 in every behavior
+    C = np.array([current is not None and m != current for m in modes], float)
+    J = params.w_W * W - params.w_P * Pr + params.w_F * F + params.w_sw * C + params.w_S * S
+    dyn = has_dynamic(obstacles)
+    available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
+    accepted = available & (h_min >= -params.eps_h_m2)
+    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted)

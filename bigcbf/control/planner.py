@@ -1,0 +1,33 @@
+"""The planner protocol every method implements (BIG-CBF and each baseline) and its info record."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ..types import Obstacles, RobotState
+
+
+@dataclass
+class PlanInfo:
+    """What a planner did in one call."""
+
+    mode: str                          # behavior mode (BIG-CBF) or a method-specific label
+    planned: bool                      # an expensive planning cycle (e.g. a behavior selection) ran in this call
+    planner_ms: float                  # time of this call [ms]
+    path: np.ndarray | None = None     # (K, 2) imagined/predicted path of the selected option (odom) [m], for videos
+
+
+@runtime_checkable
+class Planner(Protocol):
+    """Called every control tick T_C with the latest estimates; returns u_in (3,), a body twist (vx, vy, wz)."""
+
+    name: str
+
+    def reset(self, seed: int) -> None:
+        ...
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles,
+             goal: np.ndarray) -> tuple[np.ndarray, PlanInfo]:
+        ...

@@ -1,0 +1,36 @@
+"""Obstacle prediction shared by every method: constant velocity with growing covariance, Eqs. (2)-(4)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..params.stack import UncertaintyParams
+from ..types import Obstacles
+
+
+def q_sigma_for(obstacles: Obstacles, unc: UncertaintyParams) -> np.ndarray:
+    """Per-obstacle covariance-growth intensity q_Sigma,i of Eq. (3) [m^2/s], shape (M,).
+
+    Dynamic obstacles grow with ``q_sigma_m2_per_s``; static ones and wall points (which do not move) with
+    ``q_sigma_static_m2_per_s``.
+    """
+    return np.where(np.asarray(obstacles.static, bool), unc.q_sigma_static_m2_per_s, unc.q_sigma_m2_per_s)
+
+
+def predict_obstacles(obstacles: Obstacles, N: int, dt: float,
+                      q_sigma: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eqs. (2)-(4): the predicted obstacle set O^k for k = 0..N.
+
+    Eq. (2): p_{i,k+1} = p_{i,k} + dt v_i (velocity held constant over the horizon), i.e. p_{i,k} = p_{i,0} + k dt v_i.
+    Eq. (3): Sigma_{i,k+1} = Sigma_{i,k} + q_{Sigma,i} dt I_2, i.e. Sigma_{i,k} = Sigma_{i,0} + k q_{Sigma,i} dt I_2.
+    ``q_sigma`` is a scalar or one value per obstacle (M,) [m^2/s]. Returns p (N+1, M, 2) [m] and
+    cov (N+1, M, 2, 2) [m^2]; velocities and radii are unchanged along the horizon (Eq. 4).
+    """
+    m = len(obstacles)
+    k = np.arange(N + 1, dtype=float)
+    p = obstacles.p[None, :, :] + (k * dt)[:, None, None] * obstacles.v[None, :, :]
+    q = np.broadcast_to(np.asarray(q_sigma, float), (m,))
+    if np.any(q < 0):
+        raise ValueError("q_sigma must be >= 0 (Eq. 3)")
+    growth = (k * dt)[:, None] * q[None, :]                       # (N+1, M)
+    cov = obstacles.cov[None, :, :, :] + growth[:, :, None, None] * np.eye(2)[None, None, :, :]
+    return p, cov

@@ -1,0 +1,67 @@
+"""Behavior selection (Eq. 10 ranking of the candidates accepted by Eq. 16), with a minimum dwell time, a
+relative switching-improvement threshold, and the reverse-release fallback."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params.stack import StackParams
+from .behaviors import REVERSE
+from .imagination import Imagination
+
+
+@dataclass(frozen=True)
+class Selection:
+    mode: str
+    reason: str   # "initial", "best", "kept-dwell", "kept-threshold", "current-rejected", "fallback"
+    switched: bool
+
+
+class BehaviorSelector:
+    """Keeps b_cur and decides, at each selection, between keeping it and switching.
+
+    Rules, in order:
+    1. No candidate accepted (Eq. 16 rejects all, or only unavailable ones remain): REVERSE (fallback).
+    2. No retained regular mode yet, or the retained one is REVERSE or now rejected: the lowest-J accepted one.
+    3. The retained mode was selected less than ``dwell_s`` ago: keep it.
+    4. Switch only if the best accepted J beats J_cur by more than switch_rel |J_cur| + switch_abs; else keep.
+    J already contains w_sw C_sw (Eq. 10). Ties go to the first mode in the behavior order (deterministic).
+    """
+
+    def __init__(self, params: StackParams):
+        self.params = params
+        self.reset()
+
+    def reset(self) -> None:
+        self.mode: str | None = None
+        self.t_switch = -math.inf
+
+    def select(self, t: float, img: Imagination) -> Selection:
+        p = self.params
+        acc = img.accepted
+        prev = self.mode
+        if not acc.any():
+            sel = Selection(REVERSE, "fallback", prev != REVERSE)
+        else:
+            J = np.where(acc, img.J, np.inf)
+            best = img.modes[int(np.argmin(J))]
+            if prev is None:
+                sel = Selection(best, "initial", True)
+            elif prev == REVERSE or prev not in img.modes or not acc[img.index(prev)]:
+                sel = Selection(best, "current-rejected" if prev != REVERSE else "best", best != prev)
+            elif best == prev:
+                sel = Selection(prev, "best", False)
+            elif t - self.t_switch < p.dwell_s - 1e-9:
+                sel = Selection(prev, "kept-dwell", False)
+            else:
+                j_cur, j_best = float(img.J[img.index(prev)]), float(img.J[img.index(best)])
+                if j_best < j_cur - p.switch_rel * abs(j_cur) - p.switch_abs:
+                    sel = Selection(best, "best", True)
+                else:
+                    sel = Selection(prev, "kept-threshold", False)
+        if sel.switched:
+            self.t_switch = t
+        self.mode = sel.mode
+        return sel

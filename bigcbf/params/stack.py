@@ -1,0 +1,245 @@
+"""Parameters of the BIG-CBF navigation stack (paper Table I and Sec. V), loadable from TOML.
+
+Every field carries its unit in its name or its comment. The defaults are the simulation profile of
+Table I (``SIMULATION``); ``PHYSICAL`` is the hardware profile of Sec. V. A TOML file may give any subset of
+keys; missing keys keep the default (or the ``base`` preset passed to :func:`load_stack_params`), unknown keys
+are an error naming the file and the key. A calibrated *uncertainty profile* written by the digital twin is
+simply a StackParams TOML holding only the ``[uncertainty]`` and ``[uncertainty.execution]`` tables::
+
+    [uncertainty]
+    tau95_s = 0.12
+    e_zoh_m = 0.03
+
+    [uncertainty.execution]
+    A = [[0.92, 0.0, 0.0], [0.0, 0.88, 0.0], [0.0, 0.0, 0.97]]
+    d = [0.01, 0.0, 0.0]
+    residual_speed_mps = [0.0, 0.4, 0.8]
+    residual_bound_mps = [0.02, 0.03, 0.05]
+    residual_horizon_s = 0.15
+    residual_coverage = 0.95
+
+Equation numbers follow issue 3 (see ``bigcbf/control/__init__.py`` for the mapping to the paper's labels).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .robot import IDENTITY3, Mat3, Vec3
+from .toml_io import from_dict, load_toml, save, to_dict
+
+__all__ = ["ExecutionModel", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
+           "load_stack_params", "save_stack_params"]
+
+
+def _finite(name: str, *values: float) -> None:
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{name} must be finite")
+
+
+@dataclass(frozen=True)
+class ExecutionModel:
+    """The execution model of Eq. (1) and the execution-residual term e_exec(u) of Eq. (15).
+
+    The realized body twist is ``A u + d + r``; Eq. (1) uses the translational rows (vx, vy) of A and d, the
+    yaw row propagates the heading in the imagination.
+
+    ``e_exec(u) = residual_horizon_s * bound(||u_xy||)`` [m], with ``bound`` the piecewise-linear interpolation
+    of ``residual_bound_mps`` over the knots ``residual_speed_mps`` (clamped beyond the last knot).
+
+    Why this horizon: the residual r is an unmodelled *velocity* error. Odometry observes its effect once it
+    has happened, so the displacement it causes that no controller decision has accounted for accumulates only
+    from the moment a command is issued until the next command takes effect, i.e. over one control period plus
+    the perception-to-actuation delay: T_C + tau95 = 0.05 s + 0.10 s = 0.15 s in the simulation profile.
+    """
+
+    A: Mat3 = IDENTITY3                                 # gain over (vx, vy, wz) [-]
+    d: Vec3 = (0.0, 0.0, 0.0)                           # bias (m/s, m/s, rad/s)
+    residual_speed_mps: tuple[float, ...] = (0.0, 0.8)  # knots of ||u_xy|| [m/s], increasing, first 0
+    residual_bound_mps: tuple[float, ...] = (0.02, 0.04)  # bound on ||r_xy|| at each knot [m/s]
+    residual_horizon_s: float = 0.15                    # see the class docstring [s]
+    residual_coverage: float = 0.95                     # stated coverage of the bound (informational) [-]
+    identified: tuple[bool, bool, bool] = (True, True, True)  # axes the calibration identified (informational)
+
+    def __post_init__(self):
+        _finite("A", *(x for row in self.A for x in row))
+        _finite("d", *self.d)
+        ks, bs = self.residual_speed_mps, self.residual_bound_mps
+        if len(ks) == 0 or len(ks) != len(bs):
+            raise ValueError("residual_speed_mps and residual_bound_mps must be non-empty and of equal length")
+        _finite("residual knots", *ks, *bs)
+        if ks[0] != 0.0:
+            raise ValueError("residual_speed_mps must start at 0")
+        if any(b <= a for a, b in zip(ks, ks[1:])):
+            raise ValueError("residual_speed_mps must be strictly increasing")
+        if any(b < 0 for b in bs):
+            raise ValueError("residual_bound_mps must be >= 0")
+        if not (self.residual_horizon_s >= 0 and math.isfinite(self.residual_horizon_s)):
+            raise ValueError("residual_horizon_s must be >= 0")
+        if not (0.0 < self.residual_coverage <= 1.0):
+            raise ValueError("residual_coverage must be in (0, 1]")
+
+
+@dataclass(frozen=True)
+class UncertaintyParams:
+    """The shared uncertainty of Eqs. (11)-(15): D_i = r_R + r_i + d0 + kappa_l m_i.
+
+    ``q_sigma_m2_per_s`` is the covariance-growth intensity of Eq. (3) for dynamic obstacles. Choice: a walking
+    person's velocity drifts by a few tenths of m/s within a second, which puts the constant-velocity prediction
+    error at about 0.12 m (1 sigma) after the 1.5 s horizon: q = 0.12^2 / 1.5 ~= 0.01 m^2/s, i.e. a
+    beta * sigma = 0.24 m prediction radius at the end of the horizon. Static obstacles and wall points do not
+    move, so their covariance does not grow (``q_sigma_static_m2_per_s`` = 0).
+
+    ``kappa_img_static``: kappa_img used when no dynamic obstacle is tracked (Sec. V uses kappa_img = 0.8 *in
+    dynamic scenes* and the full profile otherwise); None means "same as kappa_img".
+    """
+
+    r_robot_m: float = 0.15            # robot footprint radius r_R [m]
+    d0_m: float = 0.10                 # base clearance d0 [m]
+    tau95_s: float = 0.10              # perception-to-actuation delay tau95 [s]
+    beta: float = 2.0                  # covariance scale beta [-]
+    e_zoh_m: float = 0.025             # sampled-data (zero-order-hold) displacement e_ZOH [m]
+    kappa_img: float = 1.0             # layer scaling of m_i in the imagination [-]
+    kappa_exec: float = 1.0            # layer scaling of m_i in the CBF filter [-]
+    kappa_img_static: float | None = None  # kappa_img when no dynamic obstacle is tracked [-]
+    q_sigma_m2_per_s: float = 0.01     # Eq. (3) covariance growth, dynamic obstacles [m^2/s]
+    q_sigma_static_m2_per_s: float = 0.0   # Eq. (3) covariance growth, static obstacles and wall points [m^2/s]
+    execution: ExecutionModel = field(default_factory=ExecutionModel)
+
+    def __post_init__(self):
+        vals = dict(r_robot_m=self.r_robot_m, d0_m=self.d0_m, tau95_s=self.tau95_s, beta=self.beta,
+                    e_zoh_m=self.e_zoh_m, kappa_img=self.kappa_img, kappa_exec=self.kappa_exec,
+                    q_sigma_m2_per_s=self.q_sigma_m2_per_s, q_sigma_static_m2_per_s=self.q_sigma_static_m2_per_s)
+        if self.kappa_img_static is not None:
+            vals["kappa_img_static"] = self.kappa_img_static
+        for k, v in vals.items():
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{k} must be a finite number >= 0, got {v}")
+
+
+@dataclass(frozen=True)
+class StackParams:
+    """Everything the BIG-CBF stack needs (Table I defaults; choices not in the paper documented here).
+
+    Choices the paper leaves open:
+    - ``alpha_per_s``: CBF gain of Eqs. (17)-(18). With h = |q|^2 - D^2, the constraint allows an approach speed
+      of alpha (|q|^2 - D^2) / (2 |q|); 1.5 1/s lets the robot close in at ~0.4 m/s when 0.3 m outside a 0.5 m
+      inflated radius and brakes smoothly to zero at the boundary; alpha * T_C = 0.075 << 1 keeps the sampled
+      filter close to its continuous-time design.
+    - ``d_pass_min_m`` and ``relevant_range_m``: the locally relevant obstacle and d_pass of Eq. (7), see
+      ``bigcbf.control.behaviors``.
+    - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
+      (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
+    - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (every regular behavior rejected):
+      move away from obstacles closer than r_R + r_i + d0 + release_range_m, else straight back from the goal.
+    - ``u_min``/``u_max``: actuator box of the QP (Eq. 19); must contain 0 (the braking fallback).
+    - ``H_diag``, ``R_u_diag``: diagonal weights of Eq. (19) and of E_CBF (Eq. 20); identity (all channels in
+      their SI units; the behaviors do not command yaw, so the yaw channel rarely matters).
+    - ``max_obstacle_constraints``, ``wall_sectors``: the CBF uses every tracked obstacle (ids >= 0; the
+      ``max_obstacle_constraints`` with smallest h if more) and, of the wall points (ids < 0), the nearest one in
+      each of ``wall_sectors`` equal bearing sectors around the robot, so walls on both sides of a corridor are
+      always represented. The imagination uses the same selection (from the initial state).
+    - ``w_eps``: the regularizer epsilon of Eq. (17), in the units of |grad_u gamma|^2 [m^2].
+    """
+
+    T_B_s: float = 0.5                  # behavior-selection period [s]
+    T_C_s: float = 0.05                 # execution / CBF period [s]
+    N: int = 15                         # imagination steps [-]
+    dt_s: float = 0.1                   # imagination step [s]
+    eps_g_m: float = 0.15               # goal tolerance [m]
+    v_freeze_mps: float = 0.05          # freeze threshold [m/s]
+    eps_h_m2: float = 0.10              # barrier-acceptance tolerance [m^2]
+    w_W: float = 1.0                    # weight of the CBF-compatibility surrogate W~
+    w_P: float = 1.5                    # weight of progress P [1/m]
+    w_F: float = 3.0                    # weight of freezing F
+    w_sw: float = 0.5                   # weight of switching C_sw
+    w_S: float = 0.05                   # weight of smoothness S [s^2/m^2]
+    alpha_per_s: float = 1.5            # CBF gain alpha [1/s]
+    w_eps: float = 1e-3                 # regularizer epsilon of Eq. (17) [m^2]
+    v_max_mps: float = 0.8              # translational speed limit (GOAL, PASS) [m/s]
+    v_side_mps: float = 0.55            # SIDE-L/R speed limit [m/s]
+    v_release_mps: float = 0.3          # reverse-release fallback speed [m/s]
+    release_range_m: float = 0.5        # obstacles within D0_i + this push the fallback [m]
+    d_pass_min_m: float = 0.30          # minimum lateral passing offset [m]
+    relevant_range_m: float = 3.0       # look-ahead for the locally relevant obstacle [m]
+    u_min: Vec3 = (-0.8, -0.8, -1.0)    # actuator box, lower (m/s, m/s, rad/s)
+    u_max: Vec3 = (0.8, 0.8, 1.0)       # actuator box, upper (m/s, m/s, rad/s)
+    H_diag: Vec3 = (1.0, 1.0, 1.0)      # QP weight H of Eq. (19) (diagonal)
+    R_u_diag: Vec3 = (1.0, 1.0, 1.0)    # E_CBF weight R_u of Eq. (20) (diagonal)
+    dwell_s: float = 1.0                # minimum dwell time of a selected behavior [s]
+    switch_rel: float = 0.10            # relative switching-improvement threshold [-]
+    switch_abs: float = 0.05            # absolute part of the switching threshold [-]
+    noshared_margin_m: float = 0.30     # BIG-CBF-NoShared imagination margin [m]
+    max_obstacle_constraints: int = 12  # tracked obstacles in the CBF at most [-]
+    wall_sectors: int = 8               # bearing sectors for wall-point constraints [-]
+    uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
+
+    def __post_init__(self):
+        pos = dict(T_B_s=self.T_B_s, T_C_s=self.T_C_s, dt_s=self.dt_s, eps_g_m=self.eps_g_m,
+                   alpha_per_s=self.alpha_per_s, w_eps=self.w_eps, v_max_mps=self.v_max_mps,
+                   v_side_mps=self.v_side_mps, v_release_mps=self.v_release_mps)
+        for k, v in pos.items():
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{k} must be a finite number > 0, got {v}")
+        nonneg = dict(v_freeze_mps=self.v_freeze_mps, eps_h_m2=self.eps_h_m2, w_W=self.w_W, w_P=self.w_P,
+                      w_F=self.w_F, w_sw=self.w_sw, w_S=self.w_S, release_range_m=self.release_range_m,
+                      d_pass_min_m=self.d_pass_min_m, relevant_range_m=self.relevant_range_m,
+                      dwell_s=self.dwell_s, switch_rel=self.switch_rel, switch_abs=self.switch_abs,
+                      noshared_margin_m=self.noshared_margin_m)
+        for k, v in nonneg.items():
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{k} must be a finite number >= 0, got {v}")
+        if self.N < 1:
+            raise ValueError("N must be >= 1")
+        if self.T_B_s < self.T_C_s:
+            raise ValueError("T_B_s must be >= T_C_s")
+        if self.max_obstacle_constraints < 0 or self.wall_sectors < 0:
+            raise ValueError("max_obstacle_constraints and wall_sectors must be >= 0")
+        _finite("u_min/u_max", *self.u_min, *self.u_max)
+        if not all(lo <= 0.0 <= hi for lo, hi in zip(self.u_min, self.u_max)):
+            raise ValueError("the actuator box u_min <= u <= u_max must contain 0 on every axis")
+        if not all(h > 0 and math.isfinite(h) for h in self.H_diag):
+            raise ValueError("H_diag must be > 0 (H positive definite)")
+        if not all(r >= 0 and math.isfinite(r) for r in self.R_u_diag):
+            raise ValueError("R_u_diag must be >= 0")
+
+    @property
+    def weights(self) -> tuple[float, float, float, float, float]:
+        """(w_W, w_P, w_F, w_sw, w_S) of Eq. (10)."""
+        return (self.w_W, self.w_P, self.w_F, self.w_sw, self.w_S)
+
+
+#: Table I, the simulation profile.
+SIMULATION = StackParams()
+
+#: Sec. V, the physical profile: r_R 0.15 m, d0 0.05 m, beta 1, e_ZOH 0.0716 m, kappa_exec 1, kappa_img 0.8 in
+#: dynamic scenes (1.0 when no dynamic obstacle is tracked). Latency and the execution model are calibrated per
+#: robot (``bigcbf calibrate``) and overlaid with ``load_stack_params(profile, base=PHYSICAL)``.
+PHYSICAL = dataclasses.replace(
+    SIMULATION,
+    uncertainty=UncertaintyParams(r_robot_m=0.15, d0_m=0.05, beta=1.0, e_zoh_m=0.0716, kappa_img=0.8,
+                                  kappa_exec=1.0, kappa_img_static=1.0),
+)
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
+def load_stack_params(path: str | Path, base: StackParams | None = None) -> StackParams:
+    """Read a StackParams TOML (any subset of keys). Missing keys come from ``base`` (default: the dataclass
+    defaults, i.e. SIMULATION). Unknown keys and bad values raise UserError naming the file and the key."""
+    data = load_toml(path)
+    if base is not None:
+        data = _merge(to_dict(base), data)   # unknown keys can only come from the file: errors still name it
+    return from_dict(StackParams, data, file=str(path))
+
+
+def save_stack_params(params: StackParams, path: str | Path, *, header: str = "") -> None:
+    """Write ``params`` as TOML (every key, so that the file is complete and self-describing)."""
+    save(params, path, header=header)

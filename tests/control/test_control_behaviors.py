@@ -1,0 +1,111 @@
+"""Eqs. (5)-(8): goal basis, behavior subgoals with the locally relevant obstacle, bounded feedback; fallback."""
+import math
+
+import numpy as np
+import pytest
+
+from bigcbf.control.behaviors import (MODE_INDEX, behavior_command, feedback_velocity, goal_basis, mode_indices,
+                                      policy_velocity, relevant_obstacle, release_velocity, subgoal_error)
+from bigcbf.params import SIMULATION
+from bigcbf.types import Obstacles, RobotState
+
+P = SIMULATION
+MODES7 = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD", "REVERSE")
+
+
+def test_goal_basis_eq_6():
+    d, n, dist = goal_basis(np.array([1.0, 1.0]), np.array([4.0, 5.0]))
+    np.testing.assert_allclose(d, [0.6, 0.8])
+    np.testing.assert_allclose(n, [-0.8, 0.6])          # left normal
+    assert dist == pytest.approx(5.0)
+
+
+def literal_eq8(e, vmax):
+    """Eq. (8) exactly as printed: sat_vmax[ e/||e|| min(vmax, 2||e||) + 0.35 e ]."""
+    e = np.asarray(e, float)
+    n = np.linalg.norm(e)
+    if n == 0:
+        return np.zeros(2)
+    v = e / n * min(vmax, 2.0 * n) + 0.35 * e
+    nv = np.linalg.norm(v)
+    return v if nv <= vmax else v * vmax / nv
+
+
+def test_feedback_eq_8_by_hand():
+    # e = (3, 4), ||e|| = 5: 0.8 + 1.75 = 2.55 > 0.8 -> saturated: 0.8 * (0.6, 0.8) = (0.48, 0.64)
+    # e = (0.06, 0.08), ||e|| = 0.1: min(0.8, 0.2) + 0.035 = 0.235 -> 0.235 * (0.6, 0.8) = (0.141, 0.188)
+    v = feedback_velocity(np.array([[3.0, 4.0], [0.06, 0.08], [0.0, 0.0], [1.0, 0.0]]), np.array([0.8, 0.8, 0.8, 0]))
+    np.testing.assert_allclose(v, [[0.48, 0.64], [0.141, 0.188], [0, 0], [0, 0]], atol=1e-12)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        e, vmax = rng.normal(size=2) * rng.choice([0.05, 0.3, 3.0]), rng.uniform(0, 1)
+        np.testing.assert_allclose(feedback_velocity(e[None], np.array([vmax]))[0], literal_eq8(e, vmax), atol=1e-12)
+
+
+def test_subgoals_eq_7_obstacle_dead_ahead():
+    """Robot (0,0), goal (5,0): d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 < 0.85).
+    PASS-L: d_pass = max(0.3, 0.1 + 0.15 + 0.3 + 0.1) = 0.65, floor 0.15 + 0.3 + 0.35 = 0.8 -> offset 0.8.
+    PASS-R: d_pass = max(0.3, -0.1 + 0.55) = 0.45 -> offset 0.8."""
+    obs = Obstacles.from_lists([[2.0, 0.1]], r=0.3)
+    p = np.zeros((7, 2))
+    e = subgoal_error(mode_indices(MODES7), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(e, [[5, 0], [0.85, 0.8], [0.85, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
+
+
+def test_subgoals_eq_7_obstacle_offset_to_one_side():
+    """Obstacle (1.5, 0.6), r 0.1: corridor 0.15 + 0.1 + 0.1 + 0.3 = 0.65 > 0.6 -> relevant.
+    PASS-L: d_pass = max(0.3, 0.6 + 0.35) = 0.95, floor 0.6 -> 0.95. PASS-R: max(0.3, -0.25) = 0.3, floor 0.6."""
+    obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(e, [[0.85, 0.95], [0.85, -0.6]])
+
+
+def test_no_relevant_obstacle_pass_goes_for_the_goal():
+    # behind the robot, beside the corridor, beyond the look-ahead: none is relevant
+    obs = Obstacles.from_lists([[-1.0, 0.0], [1.0, 1.2], [4.0, 0.0]], r=0.2)
+    p = np.zeros((2, 2))
+    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
+    j, _, _ = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    assert j.tolist() == [-1, -1]
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
+
+
+def test_relevant_obstacle_is_the_nearest_in_the_way():
+    obs = Obstacles.from_lists([[2.5, 0.0], [1.2, -0.3], [0.8, 2.0]], r=0.2)
+    p = np.array([[0.0, 0.0]])
+    d, n, _ = goal_basis(p, np.array([0.0 + 5.0, 0.0]))
+    j, c, r = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    assert j.tolist() == [1] and c[0] == pytest.approx(-0.3) and r[0] == pytest.approx(0.2)
+
+
+def test_goal_region_and_yield_command_zero():
+    obs = Obstacles.from_lists([[1.0, 0.0]], r=0.2)
+    idx = mode_indices(MODES7)
+    v = policy_velocity(idx, np.tile([4.9, 0.05], (7, 1)), np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(v, 0.0)              # 0.112 m from the goal: inside eps_g = 0.15
+    v = policy_velocity(idx, np.zeros((7, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(v[MODE_INDEX["YIELD"]], 0.0)
+    speeds = np.linalg.norm(v, axis=1)
+    assert speeds[0] == pytest.approx(0.8) and speeds[3] == pytest.approx(0.55)   # per-behavior limits
+
+
+def test_behavior_command_is_a_body_twist_eq_5():
+    # theta = pi/2, goal straight "up" in odom: world velocity (0, 0.8) is body (0.8, 0)
+    u = behavior_command("GOAL", RobotState(0, 0, math.pi / 2), Obstacles.empty(), np.array([0.0, 5.0]), P)
+    np.testing.assert_allclose(u, [0.8, 0.0, 0.0], atol=1e-12)
+    with pytest.raises(ValueError, match="unknown behavior"):
+        behavior_command("FLY", RobotState(0, 0, 0), Obstacles.empty(), np.array([1.0, 0.0]), P)
+
+
+def test_release_velocity():
+    # an obstacle 0.3 m ahead (inside r_R + r_i + d0 + release_range = 0.85): pushed straight back
+    v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[0.3, 0.0]]), np.array([0.1]), P)
+    np.testing.assert_allclose(v, [[-0.3, 0.0]], atol=1e-12)
+    # two obstacles: weights 0.85 - 0.5 = 0.35 (from +y) and 0.85 - 0.4 = 0.45 (from +x): direction -(0.45, 0.35)
+    v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[0.0, 0.5], [0.4, 0.0]]),
+                         np.array([0.1, 0.1]), P)
+    np.testing.assert_allclose(v[0], -0.3 * np.array([0.45, 0.35]) / math.hypot(0.45, 0.35))
+    # nothing close: straight back from the goal
+    v = release_velocity(np.zeros((1, 2)), np.array([0.0, 5.0]), np.zeros((0, 2)), np.zeros(0), P)
+    np.testing.assert_allclose(v, [[0.0, -0.3]], atol=1e-12)

@@ -1,0 +1,77 @@
+"""E_CBF (Eq. 20) and the per-step metrics; the method registry, the planner protocol, robot-side imports, perf."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bigcbf.cli.perf import BENCHES
+from bigcbf.control import METHODS, CbfFilter, PlanInfo, Planner, behavior_command
+from bigcbf.control.cbf import FilterInfo
+from bigcbf.control.metrics import cbf_energy, step_metrics, summarize
+from bigcbf.params import SIMULATION
+from bigcbf.types import Obstacles, RobotState
+
+
+def test_cbf_energy_eq_20_by_hand():
+    # du = (-0.3, 0, -0.2); R_u = diag(1, 1, 0.1): 0.09 + 0.1 * 0.04 = 0.094
+    assert cbf_energy([0.5, 0.1, 0.0], [0.8, 0.1, 0.2], [1.0, 1.0, 0.1]) == pytest.approx(0.094)
+    # a sequence sums its steps; a full matrix R_u: du = (1, 1, 0), [[2, 1, 0], [1, 2, 0], [0, 0, 1]] -> 6
+    assert cbf_energy([[0.5, 0.1, 0.0], [1.0, 1.0, 0.0]], [[0.8, 0.1, 0.2], [0.0, 0.0, 0.0]],
+                      [1.0, 1.0, 0.1]) == pytest.approx(0.094 + 2.0)
+    assert cbf_energy([1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [[2, 1, 0], [1, 2, 0], [0, 0, 1]]) == pytest.approx(6.0)
+
+
+def test_step_metrics_and_summary():
+    P = SIMULATION
+    finfo = lambda active, infeasible, ms: FilterInfo(active, infeasible, None, ms, 1, 0.1, np.zeros(1))
+    steps = [step_metrics([0.8, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", True, 2.0), finfo(True, False, 0.1), P),
+             step_metrics([0.5, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", False, 0.1), finfo(False, False, 0.05), P),
+             step_metrics([0.5, 0.2, 0], [0.0, 0, 0], PlanInfo("YIELD", False, 0.1), finfo(True, True, 0.2), P),
+             step_metrics([0.0, 0, 0], [0.0, 0, 0], PlanInfo("YIELD", True, 4.0), finfo(False, False, 0.05), P)]
+    assert steps[0].e_cbf == pytest.approx(0.09) and steps[2].e_cbf == pytest.approx(0.29)
+    s = summarize(steps)
+    assert s.steps == 4 and s.e_cbf == pytest.approx(0.38)
+    assert s.active_ratio == 0.5 and s.infeasible_ratio == 0.25
+    assert s.planner_p95_ms == pytest.approx(np.percentile([2.0, 4.0], 95))      # planning cycles only
+    assert s.mode_counts == {"GOAL": 2, "YIELD": 2}
+    assert summarize([]).steps == 0
+
+
+def test_registry_and_protocol():
+    assert {"big-cbf", "big-cbf-noshared", "cbf-only"} <= set(METHODS.names())
+    for name in ("big-cbf", "big-cbf-noshared", "cbf-only"):
+        planner = METHODS.get(name)(SIMULATION)
+        assert isinstance(planner, Planner) and planner.name == name
+        planner.reset(0)
+        u, info = planner.plan(0.0, RobotState(0, 0, 0), Obstacles.empty(), np.array([3.0, 0.0]))
+        assert u.shape == (3,) and isinstance(info, PlanInfo)
+        np.testing.assert_allclose(u, [0.8, 0.0, 0.0])          # open space: straight to the goal at 0.8 m/s
+    with pytest.raises(ValueError, match="duplicate"):
+        METHODS.register("big-cbf", lambda p: None)
+
+
+def test_cbf_only_feeds_the_goal_policy():
+    obs = Obstacles.from_lists([[1.0, 0.0]], r=0.3)
+    state, goal = RobotState(0.2, 0.1, 0.3), np.array([4.0, 0.0])
+    u, info = METHODS.get("cbf-only")(SIMULATION).plan(0.0, state, obs, goal)
+    np.testing.assert_allclose(u, behavior_command("GOAL", state, obs, goal, SIMULATION))
+    assert info.mode == "GOAL" and not info.planned and info.path is None
+    u_safe, finfo = CbfFilter(SIMULATION).filter(state, obs, u)
+    assert finfo.active and u_safe[0] < u[0]
+
+
+def test_control_runs_without_mujoco():
+    code = ("import sys, bigcbf.control, bigcbf.control.perf; "
+            "bad = [m for m in ('mujoco', 'dm_control') if m in sys.modules]; "
+            "sys.exit(1 if bad else 0)")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_perf_provider():
+    assert "bigcbf.control.perf:bench" in BENCHES
+    from bigcbf.control.perf import bench
+    out = bench(quick=True)
+    for key in ("imagination_p95_ms", "cbf_qp_p95_ms"):
+        assert out[key] > 0
+    assert out["cbf_qp_rows_mean"] == 8.0          # the benchmark does solve QPs with 8 obstacle rows

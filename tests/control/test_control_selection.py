@@ -1,0 +1,156 @@
+"""Behavior selection: hand-built situations in closed loop, dwell time, switching threshold, fallback, timing."""
+import math
+
+import numpy as np
+
+from bigcbf.control import METHODS, BigCbfPlanner, CbfFilter, behavior_command
+from bigcbf.control.imagination import Imagination
+from bigcbf.control.selection import BehaviorSelector
+from bigcbf.params import SIMULATION
+from bigcbf.types import Obstacles, RobotState
+
+P = SIMULATION
+GOAL = np.array([5.0, 0.0])
+
+
+def closed_loop(planner, obstacles_at, goal, seconds, state=RobotState(0.0, 0.0, 0.0)):
+    """Kinematic closed loop at T_C: plan, filter, integrate u_safe exactly as commanded."""
+    filt = CbfFilter(P)
+    selections, min_h = [], math.inf
+    for k in range(int(round(seconds / P.T_C_s))):
+        t = k * P.T_C_s
+        obs = obstacles_at(t)
+        u_in, info = planner.plan(t, state, obs, goal)
+        u, finfo = filt.filter(state, obs, u_in)
+        assert np.all(np.isfinite(u)) and not finfo.infeasible
+        min_h = min(min_h, finfo.h_min)
+        if info.planned:
+            selections.append(info.mode)
+        c, s = math.cos(state.theta), math.sin(state.theta)
+        v = np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+        state = RobotState(state.px + P.T_C_s * v[0], state.py + P.T_C_s * v[1], state.theta + P.T_C_s * u[2], *u)
+    return selections, state, min_h
+
+
+def side(mode):
+    return mode[-1] if mode.startswith(("PASS", "SIDE")) else None
+
+
+def test_static_obstacle_dead_ahead_pass_kept_without_chattering():
+    obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
+    sel, state, min_h = closed_loop(BigCbfPlanner(P), lambda t: obs, GOAL, 10 * P.T_B_s)
+    assert len(sel) == 10
+    assert sel[0].startswith(("PASS", "SIDE"))
+    assert len({side(m) for m in sel} - {None}) == 1          # one side only: no left/right chattering
+    assert np.linalg.norm(state.p - obs.p[0]) > 0.45 and min_h > 0
+    # it does get past the obstacle and on to the goal
+    sel, state, _ = closed_loop(BigCbfPlanner(P), lambda t: obs, GOAL, 10.0)
+    assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def pedestrian(t):
+    """Crossing right to left (+y) at 1 m/s, 1.5 m ahead, about to cut the robot's path."""
+    return Obstacles.from_lists([[1.5, -1.0 + 1.0 * t]], v=[[0.0, 1.0]], r=0.25, cov=np.eye(2) * 0.01, static=False)
+
+
+def test_crossing_pedestrian_yield_or_pass_behind():
+    planner = BigCbfPlanner(P)
+    planner.plan(0.0, RobotState(0, 0, 0), pedestrian(0.0), GOAL)
+    assert planner.mode in ("YIELD", "PASS-R", "SIDE-R")     # behind it = on its right (where it comes from)
+    img = planner.last_imagination
+    assert not img.accepted[img.index("GOAL")]               # straight on would cut in front of it
+    _, state, min_h = closed_loop(BigCbfPlanner(P), pedestrian, GOAL, 8.0)
+    assert min_h > -P.eps_h_m2 and np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_open_space_goal():
+    sel, _, _ = closed_loop(BigCbfPlanner(P), lambda t: Obstacles.empty(), GOAL, 3.0)
+    assert set(sel) == {"GOAL"}
+
+
+def pocket():
+    """Wall points of a dead end around the robot: a wall 0.6 m ahead, side walls 0.55 m left and right."""
+    front = np.c_[np.full(13, 0.6), np.linspace(-0.6, 0.6, 13)]
+    x = np.linspace(-0.4, 0.6, 11)
+    pts = np.r_[front, np.c_[x, np.full(11, 0.55)], np.c_[x, np.full(11, -0.55)]]
+    return Obstacles.from_lists(pts, r=0.0, ids=-np.ones(len(pts), int))
+
+
+def test_everything_blocked_reverse_release():
+    walls = pocket()
+    planner = BigCbfPlanner(P)
+    u, info = planner.plan(0.0, RobotState(0, 0, 0), walls, np.array([4.0, 0.0]))
+    assert info.mode == "REVERSE" and info.planned
+    assert not planner.last_imagination.accepted.any()
+    np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)   # straight back out of the pocket
+    assert info.path.shape == (P.N + 1, 2) and info.path[-1, 0] < -0.3
+    sel, _, _ = closed_loop(BigCbfPlanner(P), lambda t: walls, np.array([4.0, 0.0]), 5.0)
+    assert sel[0] == "REVERSE" and sel[-1] != "REVERSE"      # released, then a regular behavior again
+
+
+def test_robot_inside_margin_rejects_everything():
+    # D >= r_R + r_i + d0 + e_ZOH + e_exec(0) = 0.45 + 0.025 + 0.003 = 0.478 whatever the command, so
+    # h <= 0.35^2 - 0.478^2 = -0.106 < -eps_h at k = 0 for every behavior
+    obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
+    u, info = BigCbfPlanner(P).plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert info.mode == "REVERSE" and u[0] < 0
+
+
+def fake(J, accepted, modes=("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")):
+    B = len(modes)
+    z = np.zeros(B)
+    return Imagination(modes, np.zeros((B, 2, 2)), np.zeros((B, 2)), np.zeros((B, 1, 3)), z, z, z, z, z, z,
+                       np.array(J, float), np.ones(B, bool), np.array(accepted, bool))
+
+
+def test_selector_dwell_threshold_and_rejection():
+    s = BehaviorSelector(P)      # dwell 1.0 s, switch when J_best < J_cur - 0.1 |J_cur| - 0.05
+    acc = [True] * 6
+    assert s.select(0.0, fake([0, -1, 0, 0, 0, 0], acc)).mode == "PASS-L"
+    sel = s.select(0.5, fake([-5, -1, 0, 0, 0, 0], acc))       # much better, but within the dwell time
+    assert (sel.mode, sel.reason) == ("PASS-L", "kept-dwell")
+    sel = s.select(1.0, fake([-1.1, -1, 0, 0, 0, 0], acc))     # -1.1 > -1 - 0.1 - 0.05: not enough
+    assert (sel.mode, sel.reason) == ("PASS-L", "kept-threshold")
+    sel = s.select(1.5, fake([-1.2, -1, 0, 0, 0, 0], acc))     # -1.2 < -1.15: switch
+    assert (sel.mode, sel.switched) == ("GOAL", True)
+    sel = s.select(2.0, fake([0, 0, 0, -3, 0, 0], [False, True, True, True, True, True]))  # current rejected
+    assert (sel.mode, sel.reason) == ("SIDE-L", "current-rejected")
+    sel = s.select(2.5, fake([0] * 6, [False] * 6))
+    assert (sel.mode, sel.reason) == ("REVERSE", "fallback")
+    sel = s.select(3.0, fake([0, 2, 2, 2, 2, 2], acc))
+    assert sel.mode == "GOAL" and sel.switched                  # leaving the fallback needs no dwell
+    s.reset()
+    assert s.select(0.0, fake([1, 1, 1, 1, 1, 1], acc)).mode == "GOAL"     # ties: the first in order
+
+
+def test_selection_clock_and_eq_5_regeneration():
+    planner = BigCbfPlanner(P)
+    obs = Obstacles.from_lists([[2.0, 0.3]], r=0.3)
+    planned = []
+    t = 0.0
+    for k in range(41):
+        t = k * P.T_C_s                                        # 0.05 steps: not exact in floating point
+        state = RobotState(0.01 * k, 0.0, 0.0)
+        u, info = planner.plan(t, state, obs, GOAL)
+        planned.append(info.planned)
+        # Eq. (5): between selections the retained policy is re-evaluated at the latest state
+        np.testing.assert_allclose(u, behavior_command(info.mode, state, obs, GOAL, P))
+        assert info.path.shape == (P.N + 1, 2) and info.planner_ms >= 0
+    assert [k for k, p in enumerate(planned) if p] == [0, 10, 20, 30, 40]
+
+
+def test_deterministic_after_reset():
+    planner = METHODS.get("big-cbf")(P)
+    runs = []
+    for _ in range(2):
+        planner.reset(7)
+        runs.append(closed_loop(planner, pedestrian, GOAL, 3.0)[:2])
+    assert runs[0][0] == runs[1][0] and runs[0][1] == runs[1][1]
+
+
+def test_noshared_variant_runs_the_same_loop():
+    planner = METHODS.get("big-cbf-noshared")(P)
+    assert planner.name == "big-cbf-noshared" and not planner.shared
+    obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
+    _, state, _ = closed_loop(planner, lambda t: obs, GOAL, 10.0)
+    assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
