@@ -13,10 +13,15 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   (s_i - r_i < ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + d_pass_min, i.e. driving straight
   to the goal would bring the footprint closer than d0 + d_pass_min to it. Wall points (radius 0) take part like
   any obstacle.
-* d_pass of Eq. (7), per side sigma: the lateral shift that puts the robot's footprint, with the base clearance,
-  beside the relevant obstacle on side sigma, d_pass = max(d_pass_min, sigma c_i + r_R + r_i + d0). For an
-  obstacle dead ahead (c_i = 0) Eq. (7)'s own floor r_R + r_i + 0.35 dominates; for an obstacle offset towards
-  side sigma, d_pass widens the detour on that side.
+* d_pass of Eq. (7), per side sigma: the lateral shift that puts the robot's footprint, with Eq. (7)'s 0.35 m
+  clearance, beside the relevant obstacle's *group* on side sigma,
+  d_pass = max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of
+  obstacles connected to i by gaps the robot cannot pass through (gap < 2 (r_R + d0) + 0.1 m; see
+  :func:`obstacle_groups`). The paper's scenes are circles, where G(i) = {i} and the offset is
+  max(d_pass_min, sigma c_i + r_i + r_R + 0.35), i.e. Eq. (7)'s floor r_R + r_i + 0.35 for an obstacle dead
+  ahead, widened for one offset towards side sigma. A LiDAR sees a wide obstacle or a wall as many points of
+  radius 0: without the group, PASS would aim 0.5 m beside the nearest point of a 2.5 m wide obstacle and run
+  into it; with it, PASS aims past the structure's end on its side.
 * Without a relevant obstacle there is nothing to pass: PASS-sigma keeps only its goal-directed component
   (g = p + 0.85 d_g), so a robot that has completed a pass heads for the goal instead of drifting sideways; a
   PASS mode and GOAL then differ only near the goal, where the selection prefers GOAL (PASS overshoots).
@@ -72,16 +77,43 @@ def goal_basis(p, goal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return d, n, dist
 
 
-def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams):
+def obstacle_groups(obs_p, obs_r, params: StackParams) -> np.ndarray:
+    """Group labels (M,): obstacles i, j are connected when the gap between them, ||p_i - p_j|| - r_i - r_j, is
+    smaller than 2 (r_R + d0) + 0.1 m (the robot's footprint with its base clearance cannot pass between them);
+    groups are the connected components (scipy.sparse.csgraph)."""
+    from scipy.sparse.csgraph import connected_components
+
+    p = np.asarray(obs_p, float).reshape(-1, 2)
+    if len(p) <= 1:
+        return np.zeros(len(p), int)
+    r = np.asarray(obs_r, float)
+    unc = params.uncertainty
+    gap = np.hypot(*(p[:, None, :] - p[None, :, :]).transpose(2, 0, 1)) - r[:, None] - r[None, :]
+    return connected_components(gap < 2 * (unc.r_robot_m + unc.d0_m) + 0.1, directed=False)[1]
+
+
+def group_extent(sigma, j, c, obs_r, groups) -> np.ndarray:
+    """max_{m in G(j_b)} (sigma_b c_{b,m} + r_m) per row b: how far the relevant obstacle's group reaches
+    towards side sigma_b, measured from the robot across the goal line. c (B, M); j (B,), -1 for none (0)."""
+    if c.shape[1] == 0:
+        return np.zeros(len(j))
+    same = groups[np.maximum(j, 0)][:, None] == groups[None, :]
+    ext = np.max(np.where(same, np.asarray(sigma, float)[:, None] * c + np.asarray(obs_r, float)[None, :],
+                          -np.inf), axis=1)
+    return np.where(j >= 0, ext, 0.0)
+
+
+def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_offsets: bool = False):
     """The locally relevant obstacle of Eq. (7) for each row (see the module docstring).
 
     p, d_g, n_g (B, 2); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none, c_i (B,), r_i (B,)),
-    c_i and r_i being 0 where there is none.
+    c_i and r_i being 0 where there is none; with ``with_offsets`` also the cross-track offsets c (B, M).
     """
     p = np.atleast_2d(np.asarray(p, float))
     B, M = len(p), len(obs_r)
     if M == 0:
-        return np.full(B, -1), np.zeros(B), np.zeros(B)
+        out = (np.full(B, -1), np.zeros(B), np.zeros(B))
+        return out + (np.zeros((B, 0)),) if with_offsets else out
     unc = params.uncertainty
     rel = np.asarray(obs_p, float)[None, :, :] - p[:, None, :]
     s = rel[..., 0] * d_g[:, None, 0] + rel[..., 1] * d_g[:, None, 1]
@@ -93,30 +125,36 @@ def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams):
     j = np.argmin(key, axis=1)
     rows = np.arange(B)
     has = np.isfinite(key[rows, j])
-    return np.where(has, j, -1), np.where(has, c[rows, j], 0.0), np.where(has, r[0, j], 0.0)
+    out = np.where(has, j, -1), np.where(has, c[rows, j], 0.0), np.where(has, r[0, j], 0.0)
+    return out + (c,) if with_offsets else out
 
 
-def pass_offset(sigma, c_rel, r_rel, has_rel, params: StackParams) -> np.ndarray:
+def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
     """Eq. (7) lateral PASS offset max(d_pass, r_R + r_i + 0.35) [m], with d_pass = max(d_pass_min,
-    sigma c_i + r_R + r_i + d0) for a relevant obstacle (c_i its cross-track offset); 0 without one."""
+    extent + r_R + 0.35), ``extent`` being the group's reach towards the side (:func:`group_extent`; for a lone
+    obstacle sigma c_i + r_i); 0 without a relevant obstacle."""
     unc = params.uncertainty
-    d_pass = np.maximum(params.d_pass_min_m, sigma * c_rel + unc.r_robot_m + r_rel + unc.d0_m)
+    d_pass = np.maximum(params.d_pass_min_m, extent + unc.r_robot_m + PASS_EXTRA_M)
     return np.where(has_rel, np.maximum(d_pass, unc.r_robot_m + r_rel + PASS_EXTRA_M), 0.0)
 
 
-def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
     """Eq. (7): e_b = g_b - p (B, 2) for each row's mode:
     GOAL p_g - p; PASS-sigma 0.85 d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a relevant
     obstacle); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
-    YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)"""
+    YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
+    ``groups``: labels from :func:`obstacle_groups` (computed here when not given)."""
     mode_idx = np.asarray(mode_idx, int)
     p = np.atleast_2d(np.asarray(p, float))
     d_g, n_g, _ = goal_basis(p, goal)
     sigma = SIGMA[mode_idx]
     lateral = np.where(IS_SIDE[mode_idx], SIDE_LATERAL_M * sigma, 0.0)
     if np.any(IS_PASS[mode_idx]):
-        j, c_rel, r_rel = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params)
-        lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(sigma, c_rel, r_rel, j >= 0, params), lateral)
+        j, c_rel, r_rel, c = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params, with_offsets=True)
+        if groups is None:
+            groups = obstacle_groups(obs_p, obs_r, params)
+        ext = group_extent(sigma, j, c, obs_r, groups)
+        lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(ext, r_rel, j >= 0, params), lateral)
     e = FORWARD_M[mode_idx, None] * d_g + lateral[:, None] * n_g
     return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
 
@@ -149,12 +187,13 @@ def release_velocity(p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
     return params.v_release_mps * direction
 
 
-def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
     """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (Eqs. 6-8), zero inside the
     goal region; REVERSE rows use the fallback."""
     mode_idx = np.asarray(mode_idx, int)
     p = np.atleast_2d(np.asarray(p, float))
-    v = feedback_velocity(subgoal_error(mode_idx, p, goal, obs_p, obs_r, params), speed_limits(params)[mode_idx])
+    v = feedback_velocity(subgoal_error(mode_idx, p, goal, obs_p, obs_r, params, groups),
+                          speed_limits(params)[mode_idx])
     is_rev = mode_idx == MODE_INDEX[REVERSE]
     if np.any(is_rev):
         v = np.where(is_rev[:, None], release_velocity(p, goal, obs_p, obs_r, params), v)
@@ -169,9 +208,11 @@ def body_command(theta, v_world) -> np.ndarray:
     return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], np.zeros(len(v))], -1)
 
 
-def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams) -> np.ndarray:
-    """Eq. (5): u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest estimates (3,)."""
+def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams,
+                     groups=None) -> np.ndarray:
+    """Eq. (5): u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest estimates (3,).
+    ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given."""
     if mode not in MODE_INDEX:
         raise ValueError(f"unknown behavior mode {mode!r}; known: {', '.join(MODES)}")
-    v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params)
+    v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params, groups)
     return body_command(np.array([state.theta]), v)[0]

@@ -26,7 +26,8 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
-                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, mode_indices, speed_limits)
+                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, mode_indices, obstacle_groups,
+                        speed_limits)
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
 
@@ -142,6 +143,10 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         corridor = base + params.d_pass_min_m
         release_reach = base + params.release_range_m
         flat_rows = np.arange(B) * M
+        if any_pass:     # the relevant obstacle's group (Eq. (7) d_pass), from the obstacles at k = 0
+            groups = obstacle_groups(obstacles.p, r, params)
+            lone = bool(np.all(np.bincount(groups) == 1))
+            same_group = groups[:, None] == groups[None, :]
 
     p = np.full(B, complex(state.px, state.py))
     th = np.full(B, float(state.theta))
@@ -158,6 +163,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
     if M:
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
+        pass_extra = rR + PASS_EXTRA_M
 
     for k in range(N):
         Pk[k] = p
@@ -173,7 +179,11 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             j = key.argmin(axis=1)
             flat = flat_rows + j
             has = key.ravel()[flat] < np.inf
-            off = has * np.maximum(np.maximum(d_min, sigma * z.ravel()[flat].imag + base[j]), pass_floor[j])
+            if lone:
+                ext = sigma * z.ravel()[flat].imag + r[j]
+            else:
+                ext = np.max(np.where(same_group[j], sigma[:, None] * z.imag + r[None, :], -np.inf), axis=1)
+            off = has * np.maximum(np.maximum(d_min, ext + pass_extra), pass_floor[j])
             coef = coef0 + pass_sig_j * off
         e = dg * coef
         for gr in goal_rows:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params.stack import StackParams
-from .behaviors import REVERSE
+from .behaviors import MODE_INDEX, REVERSE, SIGMA
 from .imagination import Imagination
 
 
@@ -28,6 +28,14 @@ class BehaviorSelector:
     3. The retained mode was selected less than ``dwell_s`` ago: keep it.
     4. Switch only if the best accepted J beats J_cur by more than switch_rel |J_cur| + switch_abs; else keep.
     J already contains w_sw C_sw (Eq. 10). Ties go to the first mode in the behavior order (deterministic).
+
+    Side commitment (the switching threshold applied to the side): once a left or right mode (PASS/SIDE-L or -R)
+    has been selected, "the best" in rules 2 and 4 is taken among the accepted modes on that side or on none
+    (GOAL, YIELD), and an opposite-side mode replaces it only if it beats it by the switching threshold plus w_sw
+    (a side flip undoes a manoeuvre: it is charged as a second switch). The side is released when GOAL is
+    selected. Without this, the symmetric scenes the paper targets (an obstacle square on
+    the goal line) tie PASS-L with PASS-R and SIDE-L with SIDE-R, and a forced switch (the retained mode
+    rejected) could flip sides, undoing the manoeuvre; the paper's liveness argument rests on commitment.
     """
 
     def __init__(self, params: StackParams):
@@ -37,6 +45,22 @@ class BehaviorSelector:
     def reset(self) -> None:
         self.mode: str | None = None
         self.t_switch = -math.inf
+        self.side = 0.0          # +1 left, -1 right, 0 uncommitted
+
+    def _best(self, img: Imagination, J: np.ndarray) -> str:
+        """The lowest-J accepted mode, honouring the side commitment (class docstring)."""
+        p = self.params
+        best = int(np.argmin(J))
+        if self.side == 0:
+            return img.modes[best]
+        side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+        own = np.where(side != -self.side, J, np.inf)
+        k = int(np.argmin(own))
+        if not np.isfinite(own[k]) or k == best:
+            return img.modes[best]
+        if J[best] < own[k] - p.switch_rel * abs(own[k]) - p.switch_abs - p.w_sw:
+            return img.modes[best]
+        return img.modes[k]
 
     def select(self, t: float, img: Imagination) -> Selection:
         p = self.params
@@ -46,7 +70,7 @@ class BehaviorSelector:
             sel = Selection(REVERSE, "fallback", prev != REVERSE)
         else:
             J = np.where(acc, img.J, np.inf)
-            best = img.modes[int(np.argmin(J))]
+            best = self._best(img, J)
             if prev is None:
                 sel = Selection(best, "initial", True)
             elif prev == REVERSE or prev not in img.modes or not acc[img.index(prev)]:
@@ -64,4 +88,8 @@ class BehaviorSelector:
         if sel.switched:
             self.t_switch = t
         self.mode = sel.mode
+        if sel.mode in MODE_INDEX and SIGMA[MODE_INDEX[sel.mode]] != 0:
+            self.side = float(SIGMA[MODE_INDEX[sel.mode]])
+        elif sel.mode == "GOAL":
+            self.side = 0.0
         return sel

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from bigcbf.control.behaviors import (MODE_INDEX, behavior_command, feedback_velocity, goal_basis, mode_indices,
+                                      obstacle_groups,
                                       policy_velocity, relevant_obstacle, release_velocity, subgoal_error)
 from bigcbf.params import SIMULATION
 from bigcbf.types import Obstacles, RobotState
@@ -44,20 +45,21 @@ def test_feedback_eq_8_by_hand():
 
 def test_subgoals_eq_7_obstacle_dead_ahead():
     """Robot (0,0), goal (5,0): d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 < 0.85).
-    PASS-L: d_pass = max(0.3, 0.1 + 0.15 + 0.3 + 0.1) = 0.65, floor 0.15 + 0.3 + 0.35 = 0.8 -> offset 0.8.
-    PASS-R: d_pass = max(0.3, -0.1 + 0.55) = 0.45 -> offset 0.8."""
+    PASS-L: d_pass = max(0.3, 0.1 + 0.3 + 0.15 + 0.35) = 0.9, floor 0.15 + 0.3 + 0.35 = 0.8 -> offset 0.9.
+    PASS-R: d_pass = max(0.3, -0.1 + 0.3 + 0.5) = 0.7 -> offset 0.8 (the floor)."""
     obs = Obstacles.from_lists([[2.0, 0.1]], r=0.3)
     p = np.zeros((7, 2))
     e = subgoal_error(mode_indices(MODES7), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
-    np.testing.assert_allclose(e, [[5, 0], [0.85, 0.8], [0.85, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
+    np.testing.assert_allclose(e, [[5, 0], [0.85, 0.9], [0.85, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
 
 
 def test_subgoals_eq_7_obstacle_offset_to_one_side():
     """Obstacle (1.5, 0.6), r 0.1: corridor 0.15 + 0.1 + 0.1 + 0.3 = 0.65 > 0.6 -> relevant.
-    PASS-L: d_pass = max(0.3, 0.6 + 0.35) = 0.95, floor 0.6 -> 0.95. PASS-R: max(0.3, -0.25) = 0.3, floor 0.6."""
+    PASS-L: d_pass = max(0.3, 0.6 + 0.1 + 0.15 + 0.35) = 1.2, floor 0.6 -> 1.2.
+    PASS-R: max(0.3, -0.6 + 0.1 + 0.5) = 0.3, floor 0.6 -> 0.6."""
     obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P)
-    np.testing.assert_allclose(e, [[0.85, 0.95], [0.85, -0.6]])
+    np.testing.assert_allclose(e, [[0.85, 1.2], [0.85, -0.6]])
 
 
 def test_no_relevant_obstacle_pass_goes_for_the_goal():
@@ -109,3 +111,22 @@ def test_release_velocity():
     # nothing close: straight back from the goal
     v = release_velocity(np.zeros((1, 2)), np.array([0.0, 5.0]), np.zeros((0, 2)), np.zeros(0), P)
     np.testing.assert_allclose(v, [[0.0, -0.3]], atol=1e-12)
+
+
+def test_pass_clears_the_whole_group_of_a_wide_obstacle():
+    """A wall 2 m wide across the goal line, seen as points of radius 0 every 0.2 m from y = -1 to 1 at x = 2:
+    one group (gaps 0.2 < 2 (0.15 + 0.1) + 0.1). PASS-L aims past its left end: extent 1.0 (the point at y = 1),
+    d_pass = 1.0 + 0.15 + 0.35 = 1.5; PASS-R likewise -1.5. A lone point would give only max(0.3, 0.5, 0.5)."""
+    ys = np.linspace(-1.0, 1.0, 11)
+    wall = Obstacles.from_lists(np.stack([np.full(11, 2.0), ys], 1), r=0.0, ids=-np.ones(11, int))
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), wall.p, wall.r, P)
+    np.testing.assert_allclose(e, [[0.85, 1.5], [0.85, -1.5]])
+    lone = wall.subset([5])
+    e1 = subgoal_error(mode_indices(("PASS-L",)), np.zeros((1, 2)), np.array([5.0, 0.0]), lone.p, lone.r, P)
+    np.testing.assert_allclose(e1, [[0.85, 0.5]])
+
+
+def test_obstacle_groups_split_at_passable_gaps():
+    """Gaps: 0.3 (< 0.6: same group), then 1.0 (>= 0.6: a new group); radii count against the gap."""
+    labels = obstacle_groups(np.array([[0, 0], [0, 0.3], [0, 1.3], [3, 0]]), np.array([0, 0, 0, 0.2]), P)
+    assert labels[0] == labels[1] and labels[1] != labels[2] and len(set(labels)) == 3

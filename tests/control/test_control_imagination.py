@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bigcbf.control.behaviors import BEHAVIORS, behavior_command
+from bigcbf.control.behaviors import BEHAVIORS, behavior_command, obstacle_groups
 from bigcbf.control.imagination import imagine, rollout_paths
 from bigcbf.control.prediction import predict_obstacles, q_sigma_for
 from bigcbf.control.uncertainty import inflated_radius, uncertainty_radius
@@ -27,6 +27,7 @@ def reference(state, obs, goal, params, modes, shared, current):
     Pp, cov = predict_obstacles(obs, N, dt, q_sigma_for(obs, unc))
     dyn = bool(np.any(~obs.static & (obs.ids >= 0)))
     kap = unc.kappa_img if (unc.kappa_img_static is None or dyn) else unc.kappa_img_static
+    groups = obstacle_groups(obs.p, obs.r, params)     # the groups of the obstacles at k = 0, as imagine() does
     out = []
     for b in modes:
         x, th = np.array([state.px, state.py]), state.theta
@@ -45,7 +46,7 @@ def reference(state, obs, goal, params, modes, shared, current):
 
         for k in range(N):
             o_k = Obstacles(Pp[k], obs.v, cov[k], obs.r, obs.static, obs.ids)
-            u = behavior_command(b, RobotState(x[0], x[1], th), o_k, goal, params)
+            u = behavior_command(b, RobotState(x[0], x[1], th), o_k, goal, params, groups)
             us.append(u)
             vreal = rot(th) @ (A[:2] @ u + d[:2])
             hk = h_of(x, th, u, k)
