@@ -30,7 +30,11 @@ Choices the paper leaves open (documented here, parameters in StackParams):
 * Inside the goal region (Eq. 5 of Sec. II, ||p - p_g|| <= eps_g) every policy commands zero.
 * REVERSE (reverse-release fallback): move at ``v_release_mps`` away from the obstacles closer than
   r_R + r_i + d0 + ``release_range_m``, weighted by how deep they are inside that range; if none is that close
-  (or their pushes cancel), straight back away from the goal.
+  (or their pushes cancel), straight back away from the goal. "Away" from a moving obstacle (speed above
+  ``RELEASE_MOVING_MPS``) means out of its path, perpendicular to its velocity (to the side the robot is already
+  on; to the obstacle's right when exactly on its path): backing away along a pedestrian's walking direction
+  would keep the robot in front of it (seen in the blind corner: the robot fled down a corridor ahead of the
+  person).
 """
 from __future__ import annotations
 
@@ -55,6 +59,7 @@ PASS_EXTRA_M = 0.35            # Eq. (7) PASS floor r_R + r_i + 0.35 [m]
 GAIN_NEAR_PER_S = 2.0          # Eq. (8) (2 1/s) ||e_b||
 GAIN_LIN_PER_S = 0.35          # Eq. (8) (0.35 1/s) e_b
 _TINY = 1e-12
+RELEASE_MOVING_MPS = 0.2       # obstacles faster than this are released from sideways (see REVERSE above)
 
 
 def speed_limits(params: StackParams) -> np.ndarray:
@@ -171,7 +176,23 @@ def feedback_velocity(e, v_max) -> np.ndarray:
     return e * (mag / np.maximum(n, _TINY))[:, None]
 
 
-def release_velocity(p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
+def release_directions(q, obs_v) -> np.ndarray:
+    """Unit directions (B, M, 2) in which to release from each obstacle: along q = p - p_i for a slow obstacle;
+    for a moving one, perpendicular to its velocity, towards the robot's side of its path."""
+    q = np.asarray(q, float)
+    n = q / np.maximum(np.hypot(q[..., 0], q[..., 1]), _TINY)[..., None]
+    if obs_v is None:
+        return n
+    v = np.asarray(obs_v, float)[None]
+    speed = np.hypot(v[..., 0], v[..., 1])
+    vh = v / np.maximum(speed, _TINY)[..., None]
+    right = np.stack([vh[..., 1], -vh[..., 0]], -1)
+    lateral = q[..., 0] * right[..., 0] + q[..., 1] * right[..., 1]
+    side = np.where(lateral >= 0, 1.0, -1.0)[..., None] * right
+    return np.where((speed > RELEASE_MOVING_MPS)[..., None], side, n)
+
+
+def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> np.ndarray:
     """The reverse-release fallback velocity (B, 2) [m/s] (see the module docstring)."""
     p = np.atleast_2d(np.asarray(p, float))
     unc = params.uncertainty
@@ -181,13 +202,13 @@ def release_velocity(p, goal, obs_p, obs_r, params: StackParams) -> np.ndarray:
         q = p[:, None, :] - np.asarray(obs_p, float)[None]
         dist = np.hypot(q[..., 0], q[..., 1])
         w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m - dist, 0.0)
-        push = np.sum((w / np.maximum(dist, _TINY))[..., None] * q, axis=1)
+        push = np.sum(w[..., None] * release_directions(q, obs_v), axis=1)
     n = np.hypot(push[:, 0], push[:, 1])
     direction = np.where((n > 1e-9)[:, None], push / np.maximum(n, _TINY)[:, None], -d_g)
     return params.v_release_mps * direction
 
 
-def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
+def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None) -> np.ndarray:
     """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (Eqs. 6-8), zero inside the
     goal region; REVERSE rows use the fallback."""
     mode_idx = np.asarray(mode_idx, int)
@@ -196,7 +217,7 @@ def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups
                           speed_limits(params)[mode_idx])
     is_rev = mode_idx == MODE_INDEX[REVERSE]
     if np.any(is_rev):
-        v = np.where(is_rev[:, None], release_velocity(p, goal, obs_p, obs_r, params), v)
+        v = np.where(is_rev[:, None], release_velocity(p, goal, obs_p, obs_r, params, obs_v), v)
     dist = np.hypot(*(np.asarray(goal, float) - p).T)
     return np.where((dist > params.eps_g_m)[:, None], v, 0.0)
 
@@ -214,5 +235,6 @@ def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, p
     ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given."""
     if mode not in MODE_INDEX:
         raise ValueError(f"unknown behavior mode {mode!r}; known: {', '.join(MODES)}")
-    v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params, groups)
+    v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params, groups,
+                        obstacles.v)
     return body_command(np.array([state.theta]), v)[0]

@@ -27,6 +27,7 @@ from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
                         MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, mode_indices, obstacle_groups,
+                        release_directions,
                         speed_limits)
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
@@ -196,7 +197,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                 qz = p[:, None] - Oc[k]
                 qd = np.abs(qz)
                 w = np.maximum(release_reach - qd, 0.0)
-                push = (w / np.maximum(qd, _TINY) * qz).sum(axis=1)
+                dirs = release_directions(np.stack([qz.real, qz.imag], -1), obstacles.v)
+                push = (w * (dirs[..., 0] + 1j * dirs[..., 1])).sum(axis=1)
             npush = np.abs(push)
             vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * (dist > eps_g)
             v = np.where(is_rev, vr, v)

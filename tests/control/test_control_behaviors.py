@@ -130,3 +130,16 @@ def test_obstacle_groups_split_at_passable_gaps():
     """Gaps: 0.3 (< 0.6: same group), then 1.0 (>= 0.6: a new group); radii count against the gap."""
     labels = obstacle_groups(np.array([[0, 0], [0, 0.3], [0, 1.3], [3, 0]]), np.array([0, 0, 0, 0.2]), P)
     assert labels[0] == labels[1] and labels[1] != labels[2] and len(set(labels)) == 3
+
+
+def test_release_from_a_moving_obstacle_is_sideways():
+    """A pedestrian 0.4 m to the robot's left walking in -y (towards the robot), weight 0.85 - 0.4 = 0.45:
+    backing away would mean -y, along its path; the release goes out of its path instead. Its velocity (0, -1):
+    right-hand normal (-1, 0); the robot (q = (0, -0.4)) is exactly on the path line -> to the pedestrian's right,
+    i.e. -x at 0.3 m/s. A pedestrian at q = (0.2, -0.4) (robot to its left of the line) -> +x."""
+    v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[0.0, 0.4]]), np.array([0.25]), P,
+                         obs_v=np.array([[0.0, -1.0]]))
+    np.testing.assert_allclose(v, [[-0.3, 0.0]], atol=1e-12)
+    v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[-0.2, 0.4]]), np.array([0.25]), P,
+                         obs_v=np.array([[0.0, -1.0]]))
+    np.testing.assert_allclose(v, [[0.3, 0.0]], atol=1e-12)
