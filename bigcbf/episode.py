@@ -85,11 +85,12 @@ class Episode:
 
     def __init__(self, scenario: Scenario, method: str, seed: int, params: StackParams = SIMULATION,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
-                 lidar: LidarConfig = LidarConfig()):
+                 lidar: LidarConfig = LidarConfig(), time_limit_s: float | None = None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
         self.perception_mode = perception
+        self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
         self.truth = GroundTruth(self.world.model, self.world.scene, params.uncertainty.r_robot_m)
         peds = scenario.pedestrians
@@ -135,7 +136,7 @@ class Episode:
         collision = success = False
         obstacles, scan, scan_t = Obstacles.empty(), None, 0.0
         k = 0
-        limit_steps = int(round(self.scenario.time_limit_s / w.dt))
+        limit_steps = int(round(self.time_limit_s / w.dt))
         while k < limit_steps:
             if k % steps_per_scan == 0:
                 scan = w.scan()
