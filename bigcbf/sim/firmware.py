@@ -6,6 +6,7 @@ actually sent to the wheels is ``A u + d + r`` (A 3x3, bias d, bounded residual 
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -73,12 +74,13 @@ class WheelOdometry:
         self.twist = self.kin.forward(wheel_speeds)
         if gyro_z is not None:
             self.twist[2] = gyro_z
-        vx, vy, wz = self.twist
+        vx, vy, wz = (float(x) for x in self.twist)
         mid = self.theta + 0.5 * wz * dt          # midpoint heading (second order)
-        c, s = np.cos(mid), np.sin(mid)
+        c, s = math.cos(mid), math.sin(mid)
         self.x += (c * vx - s * vy) * dt
         self.y += (s * vx + c * vy) * dt
-        self.theta = float(np.arctan2(np.sin(self.theta + wz * dt), np.cos(self.theta + wz * dt)))
+        th = self.theta + wz * dt
+        self.theta = math.atan2(math.sin(th), math.cos(th))
 
     def state(self) -> RobotState:
         return RobotState(self.x, self.y, self.theta, *map(float, self.twist))

@@ -9,7 +9,7 @@ with e_i the unit vector to the next waypoint, n_ij the unit vector from j to i,
 w(phi) = lambda + (1 - lambda) (1 + cos phi) / 2 the anisotropy that lets people react mostly to what is ahead of
 them. "Reactive" pedestrians also treat the robot (radius r_R, true position) as such a neighbour, with its own
 strength A_robot; non-reactive ones ignore it (they model people who do not see the robot). Speeds are capped at
-1.3 v0. Integrated by semi-implicit Euler at the physics timestep; positions drive MuJoCo mocap bodies.
+1.3 v0. Integrated by semi-implicit Euler (the episode steps it at 50 Hz); positions drive MuJoCo mocap bodies.
 """
 from __future__ import annotations
 

@@ -59,15 +59,15 @@ class GroundTruth:
 
     def clearance(self, p, ped_p: np.ndarray) -> float:
         """min over obstacles of (distance from the robot centre to the obstacle surface) - r_R."""
-        p = np.asarray(p, float)
-        ds = [np.inf]
+        x, y = float(p[0]), float(p[1])
+        best = np.inf
         if len(self.rect_c):
-            ds.append(self.rect_distances(p).min())
+            best = min(best, self.rect_distances(np.array([x, y])).min())
         if len(self.circ_c):
-            ds.append((np.linalg.norm(self.circ_c - p, axis=1) - self.circ_r).min())
+            best = min(best, (np.hypot(self.circ_c[:, 0] - x, self.circ_c[:, 1] - y) - self.circ_r).min())
         if len(ped_p):
-            ds.append((np.linalg.norm(ped_p - p, axis=1) - self.ped_r).min())
-        return float(min(ds) - self.r_robot)
+            best = min(best, (np.hypot(ped_p[:, 0] - x, ped_p[:, 1] - y) - self.ped_r).min())
+        return float(best - self.r_robot)
 
     def in_contact(self, data: mujoco.MjData) -> bool:
         """Physical contact between the robot and any obstacle, wall or pedestrian (MuJoCo's contacts)."""

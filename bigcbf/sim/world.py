@@ -57,6 +57,7 @@ class SimWorld:
         self._imu_acc = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_acc")]
         self._imu_quat = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_quat")]
         self._hooks: list[Callable[["SimWorld"], None]] = []
+        self._ctrl_for, self._ctrl = None, np.zeros(4)
         self.odometry = WheelOdometry(kinematics)
         self.reset_pose(*self.scene.robot_start)
 
@@ -86,7 +87,10 @@ class SimWorld:
         for _ in range(n):
             for hook in self._hooks:
                 hook(self)
-            d.ctrl[self._act] = self.kin.inverse(self.imperfection.at(self.t))
+            twist = self.imperfection.at(self.t)
+            if twist is not self._ctrl_for:            # wheel targets change only with the executed twist
+                self._ctrl_for, self._ctrl = twist, self.kin.inverse(twist)
+            d.ctrl[self._act] = self._ctrl
             mujoco.mj_step(m, d)
             self.odometry.update(d.qvel[self._wheel_dof], m.opt.timestep, d.sensordata[self._imu_gyro + 2])
 
