@@ -13,7 +13,7 @@ from bigcbf.scenario import load_scenario, scenario_files
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
-from regenerate_golden import GOLDEN_EPISODES, GOLDEN_FILE, golden_metrics  # noqa: E402
+from regenerate_golden import GOLDEN_EPISODES, GOLDEN_FILE, golden_run  # noqa: E402
 
 
 @pytest.mark.parametrize("name", sorted(scenario_files()))
@@ -26,17 +26,25 @@ def test_each_scenario_builds_and_runs_2s(name):
 
 @pytest.mark.parametrize("scenario, method, seed", GOLDEN_EPISODES)
 def test_physics_run_is_reproducible_and_matches_golden(scenario, method, seed):
-    """Same seed -> the same numbers, twice, and equal to the stored golden values
-    (scripts/regenerate_golden.py rewrites them on purpose after a deliberate change)."""
-    a = golden_metrics(scenario, method, seed)
-    b = golden_metrics(scenario, method, seed)
+    """Same seed -> the same run, twice, bit for bit; and the stored golden values (scripts/regenerate_golden.py
+    rewrites them on purpose after a deliberate change; its docstring says why there are two kinds):
+    the first seconds' commands and true poses to 1e-7, the whole episode's discrete outcomes exactly and its
+    real-valued metrics to 2 %."""
+    a = golden_run(scenario, method, seed)
+    b = golden_run(scenario, method, seed)
     assert a == b
     golden = json.loads(GOLDEN_FILE.read_text())[f"{scenario}/{method}/{seed}"]
+    assert len(a["trace"]) == len(golden["trace"]) > 10
+    np.testing.assert_allclose(np.array(a["trace"]), np.array(golden["trace"]), rtol=1e-7, atol=1e-9)
     for k in DETERMINISTIC_KEYS:
-        if isinstance(golden[k], float):
-            assert a[k] == pytest.approx(golden[k], rel=1e-9, abs=1e-12), k
+        got, want = a["metrics"][k], golden["metrics"][k]
+        if k == "mode_history":
+            assert [m for _, m in got] == [m for _, m in want], k
+            np.testing.assert_allclose([t for t, _ in got], [t for t, _ in want], atol=0.55, err_msg=k)
+        elif isinstance(want, (int, float)) and not isinstance(want, bool):
+            assert got == pytest.approx(want, rel=0.02, abs=1e-3), k
         else:
-            assert json.loads(json.dumps(a[k])) == golden[k], k
+            assert got == want, k
 
 
 def test_required_sidestepping_seed0_big_cbf_succeeds_cbf_only_stalls():
