@@ -11,6 +11,7 @@ BENCHES = [
     "bigcbf.sim.perf:bench",
     "bigcbf.perception.perf:bench",
     "bigcbf.control.perf:bench",
+    "bigcbf.control.baselines.perf:bench",
     "bigcbf.episode_perf:bench",
 ]
 

@@ -37,3 +37,7 @@ class CbfOnlyPlanner:
 METHODS.register("big-cbf", lambda params: BigCbfPlanner(params, shared=True))
 METHODS.register("big-cbf-noshared", lambda params: BigCbfPlanner(params, shared=False))
 METHODS.register("cbf-only", CbfOnlyPlanner)
+
+from . import baselines as _baselines  # noqa: E402  (the five comparison methods register themselves here)
+
+_baselines.register(METHODS)

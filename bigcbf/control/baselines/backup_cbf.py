@@ -1,0 +1,81 @@
+"""Backup-CBF + CBF: a backup-policy shield after Chen, Jankovic, Santillo and Ames (2021), "Backup control
+barrier functions: formulation and comparative study".
+
+Backup CBFs certify a state as safe when the closed-loop trajectory of a backup policy pi_b started there stays
+in the safe set over a finite horizon (the implicit safe set S_I = {x : h(phi_b(tau, x)) >= 0, tau in [0, T]}).
+A shield keeps the nominal input u_nom while the state it leads to is in S_I and otherwise moves the input
+towards the backup. Here, at every control tick:
+
+* Nominal: the GOAL feedback law (Eq. 8 with b = GOAL), as for CBF-only.
+* Backup policy pi_b: braking to a stop (world velocity command 0) tracked with the deceleration limit
+  ``a_brake_mps2`` (:mod:`.shield`); horizon N dt = 1.5 s; safety h_i^k >= 0 with the shared D_i (Eq. 14,
+  kappa_exec) against the shared prediction (Eqs. 2-3) for every obstacle and step.
+* Shield, the blending form compared by Chen et al.: candidates u_lambda = (1 - lambda) u_nom + lambda u_b for
+  lambda on the grid ``blends`` (0 = nominal, 1 = backup). For each, the state after one control step T_C
+  under u_lambda (Eq. 1, nominal) is computed and the backup rollout from there (initial velocity that of
+  u_lambda, obstacles predicted from T_C on) is checked. The smallest certified lambda is executed; if none is
+  certified the backup command itself is executed (the shield's last resort; the hard CBF downstream handles
+  what braking cannot).
+The rollouts are one batch over the blend grid (one loop over the 15 steps). Deterministic.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...params.stack import StackParams
+from ...types import Obstacles, RobotState
+from ..behaviors import behavior_command
+from ..planner import PlanInfo
+from ..uncertainty import nominal_velocity
+from .common import at_goal, clip_command, predict
+from .shield import one_step, rollout
+
+
+@dataclass(frozen=True)
+class BackupCbfParams:
+    a_brake_mps2: float = 2.0                                  # braking deceleration of the backup [m/s^2]
+    blends: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)    # lambda grid, increasing, from 0 to 1 [-]
+
+
+def brake_policy(k: int, p: np.ndarray, obs_p: np.ndarray) -> np.ndarray:
+    """pi_b: command zero velocity (B, 2)."""
+    return np.zeros_like(p)
+
+
+class BackupCbfPlanner:
+    """Backup-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
+
+    name = "backup-cbf"
+
+    def __init__(self, params: StackParams, backup: BackupCbfParams = BackupCbfParams()):
+        self.params, self.backup = params, backup
+        self.last_h_min: np.ndarray | None = None
+
+    def reset(self, seed: int) -> None:
+        self.last_h_min = None
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        p = self.params
+        goal = np.asarray(goal, float).reshape(2)
+        if at_goal(state, goal, p):
+            return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
+        u_nom = behavior_command("GOAL", state, obstacles, goal, p)
+        lam = np.asarray(self.backup.blends, float)
+        U = (1.0 - lam)[:, None] * u_nom[None, :]                  # u_b = 0
+        v0 = nominal_velocity(state.theta, U, p.uncertainty.execution)
+        p1 = one_step(state.p[None], state.theta, U, p)
+        pred = predict(obstacles, p, t0_s=p.T_C_s)
+        ro = rollout(p1, v0, state.theta, brake_policy, pred, p, self.backup.a_brake_mps2)
+        self.last_h_min = ro.h_min
+        ok = np.flatnonzero(ro.h_min >= 0.0)
+        if len(ok):
+            j = int(ok[0])
+            mode = "NOMINAL" if lam[j] == 0.0 else ("BACKUP" if lam[j] == 1.0 else "BLEND")
+        else:
+            j, mode = len(lam) - 1, "BACKUP"
+        u = clip_command(U[j], p)
+        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, ro.p[j])

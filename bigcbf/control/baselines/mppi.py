@@ -1,0 +1,146 @@
+"""MPPI + CBF: model predictive path integral control (Williams et al. 2017) at the BIG-CBF outer-loop rate.
+
+As configured in the paper (Sec. IV-A): a planning cycle every T_B = 0.5 s (2 Hz), the same 1.5 s horizon as
+BIG-CBF (N = 15 steps of dt = 0.1 s), 512 sampled control sequences, two sampling updates per cycle; numpy,
+vectorized over samples, steps and obstacles.
+
+* Decision variable: a sequence of world-frame translational velocities V (N, 2); the body command is
+  [R(theta)^T V_k, 0] (holonomic base, circular footprint: yaw is not used, wz = 0). World frame, so the
+  sequence keeps its meaning if the odometry yaw drifts between updates.
+* Sampling (Williams et al., Alg. 2): V^s = V + eps^s, eps ~ N(0, sigma^2 I), each sample clipped to
+  |v| <= v_max; sample 0 is the unperturbed mean, sample 1 the stop sequence. The RNG is
+  np.random.default_rng(seed) created in ``reset(seed)``: an episode is deterministic per seed.
+* Rollout: Eq. (1) (nominal execution model) from the current state, obstacles by the shared prediction
+  (Eqs. 2-3); the inflated radius D_i of Eq. (14) with m_i of Eq. (15) at each sample's command, kappa_exec.
+* Cost S(V^s) = sum_k dt [w_goal ||p_k - p_g|| + w_coll 1(h_min,k < 0) + w_clear exp(-d_k / l_clear)]
+  + w_term ||p_N - p_g|| + w_smooth sum_k ||V_k - V_{k-1}||^2 (V_{-1} = the measured velocity)
+  + lambda sum_k V_k^T Sigma^{-1} eps_k (the control-cost term of the information-theoretic update, gamma = 1),
+  with d_k = min_i ||q_i|| - D_i at step k.
+* Update: w_s = exp(-(S_s - min S)/lambda) / sum; V <- V + sum_s w_s eps_s (then clipped); twice per cycle.
+* Warm start: the previous sequence shifted by the elapsed steps (0.5 s = 5 steps), padded with its last value.
+* Between updates the optimized sequence is followed, time-indexed: at time t the command is V_k with
+  k = floor((t - t_plan) / dt) (the last element beyond the horizon). Zero inside the goal region.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...params.stack import StackParams
+from ...types import Obstacles, RobotState
+from ..planner import PlanInfo
+from .common import at_goal, barrier_along, body_from_world, clip_command, integrate, predict, world_velocity
+
+_T_EPS = 1e-6
+_TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class MppiParams:
+    """MPPI sampling and cost (Williams et al. give the algorithm; the paper the rate, horizon and counts)."""
+
+    samples: int = 512                # sampled sequences per update [-]
+    iterations: int = 2               # sampling updates per planning cycle [-]
+    sigma_mps: float = 0.35           # exploration noise std per axis [m/s]
+    lam: float = 0.1                  # temperature lambda [cost units]
+    w_goal: float = 2.0               # running goal-distance cost [1/s]
+    w_term: float = 10.0              # terminal goal-distance cost [1/m]
+    w_coll: float = 200.0             # running penalty while inside an inflated radius [1/s]
+    w_clear: float = 2.0              # running clearance cost [1/s]
+    l_clear_m: float = 0.15           # clearance cost length scale [m]
+    w_smooth: float = 0.05            # smoothness weight [s^2/m^2]
+
+
+def sample_sequences(V: np.ndarray, rng: np.random.Generator, v_max: float, mp: MppiParams
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """V^s = clip(V + eps^s) (S, N, 2) and the effective noises eps^s = V^s - V; sample 0 is V itself and
+    sample 1 the stop sequence."""
+    S, N = mp.samples, len(V)
+    eps = rng.normal(0.0, mp.sigma_mps, (S, N, 2))
+    Vs = V[None] + eps
+    Vs[0] = V
+    Vs[1] = 0.0
+    n = np.hypot(Vs[..., 0], Vs[..., 1])
+    Vs *= np.minimum(1.0, v_max / np.maximum(n, _TINY))[..., None]
+    return Vs, Vs - V[None]
+
+
+def mppi_weights(S: np.ndarray, lam: float) -> np.ndarray:
+    """w_s = exp(-(S_s - min S)/lambda) / sum_s exp(-(S_s - min S)/lambda) (Williams et al. 2017, Alg. 2)."""
+    z = np.exp(-(S - np.min(S)) / lam)
+    return z / z.sum()
+
+
+class MppiPlanner:
+    """MPPI (Williams et al. 2017) at 2 Hz; follows its sequence between updates; deterministic per seed."""
+
+    name = "mppi"
+
+    def __init__(self, params: StackParams, mppi: MppiParams = MppiParams()):
+        self.params, self.mppi = params, mppi
+        self.reset(0)
+
+    def reset(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.V = np.zeros((self.params.N, 2))
+        self._t_plan: float | None = None
+        self._next_t: float | None = None
+        self._path: np.ndarray | None = None
+
+    def costs(self, Vs: np.ndarray, eps: np.ndarray, state: RobotState, pred, goal) -> tuple[np.ndarray, np.ndarray]:
+        """S(V^s) (S,) of the module docstring and the rollout positions (S, N+1, 2)."""
+        p, mp = self.params, self.mppi
+        dt = p.dt_s
+        U = body_from_world(state.theta, Vs)
+        paths, theta = integrate(state, U, dt, p)
+        dg = np.hypot(*(paths - goal).transpose(2, 0, 1))           # (S, N+1)
+        cost = mp.w_goal * dt * dg[:, 1:].sum(axis=1) + mp.w_term * dg[:, -1]
+        if pred.M:
+            h = barrier_along(paths, theta, U, pred, p)[:, 1:]       # (S, N, M)
+            qn = np.hypot(*(paths[:, 1:, None, :] - pred.p[None, 1:]).transpose(3, 0, 1, 2))
+            d = (qn - np.sqrt(np.maximum(qn * qn - h, 0.0))).min(axis=2)   # ||q|| - D, nearest obstacle
+            cost += dt * (mp.w_coll * (d < 0).sum(axis=1) + mp.w_clear * np.exp(-np.maximum(d, 0.0)
+                                                                                 / mp.l_clear_m).sum(axis=1))
+        v_prev = np.concatenate([np.broadcast_to(world_velocity(state), (len(Vs), 1, 2)), Vs[:, :-1]], axis=1)
+        cost += mp.w_smooth * ((Vs - v_prev) ** 2).sum(axis=(1, 2))
+        cost += mp.lam * (self.V[None] * eps).sum(axis=(1, 2)) / mp.sigma_mps ** 2
+        return cost, paths
+
+    def optimize(self, state: RobotState, obstacles: Obstacles, goal) -> None:
+        """One planning cycle: ``iterations`` MPPI updates of the warm-started sequence."""
+        p, mp = self.params, self.mppi
+        pred = predict(obstacles, p)
+        for _ in range(mp.iterations):
+            Vs, eps = sample_sequences(self.V, self.rng, p.v_max_mps, mp)
+            S, paths = self.costs(Vs, eps, state, pred, goal)
+            w = mppi_weights(S, mp.lam)
+            V = self.V + np.tensordot(w, eps, axes=1)
+            n = np.hypot(V[:, 0], V[:, 1])
+            self.V = V * np.minimum(1.0, p.v_max_mps / np.maximum(n, _TINY))[:, None]
+        U = body_from_world(state.theta, self.V[None])
+        self._path = integrate(state, U, p.dt_s, p)[0][0]
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        p = self.params
+        goal = np.asarray(goal, float).reshape(2)
+        planned = self._next_t is None or t >= self._next_t - _T_EPS
+        if planned:
+            if self._t_plan is not None:                        # warm start: shift by the elapsed steps
+                shift = min(int(round((t - self._t_plan) / p.dt_s)), p.N)
+                if shift > 0:
+                    self.V = np.concatenate([self.V[shift:], np.repeat(self.V[-1:], shift, axis=0)])
+            self.optimize(state, obstacles, goal)
+            self._t_plan = t
+            nxt = t if self._next_t is None else self._next_t
+            while nxt <= t + _T_EPS:
+                nxt += p.T_B_s
+            self._next_t = nxt
+        if at_goal(state, goal, p):
+            u = np.zeros(3)
+        else:
+            k = min(int(np.floor((t - self._t_plan) / p.dt_s + _T_EPS)), p.N - 1)
+            u = clip_command(body_from_world(state.theta, self.V[k]), p)
+        return u, PlanInfo("MPPI", planned, (time.perf_counter() - t0) * 1e3, self._path)

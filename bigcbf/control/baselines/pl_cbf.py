@@ -1,0 +1,128 @@
+"""PL-CBF + CBF: Policy-Library CBF (Kim, Okamoto, Hoxha, Fainekos and Panagou 2026, "Policy Library CBF:
+finite-horizon safety at runtime via parallel rollouts"; code: github.com/tkkim-robot/plcbf).
+
+PL-CBF generalizes the single backup policy of backup CBFs to a finite library of closed-loop fallback policies
+rolled out in parallel: a state is certified when at least one library policy keeps the trajectory safe over the
+horizon, and the nominal input is kept whenever it leads to a certified state. The authors' navigation examples
+use a set of directional ("angle") fallback policies plus stopping; we use, as world-velocity policies
+(:mod:`.shield`, acceleration limit ``a_max_mps2``, horizon N dt = 1.5 s, shared D_i with kappa_exec and the
+shared prediction):
+
+* STOP: command zero velocity;
+* DIR-j, j = 0..n_dir-1: move at ``v_dir_mps`` along the goal direction rotated by 2 pi j / n_dir for
+  ``t_move_s``, then stop (ending at rest, the terminal set of a backup policy);
+* RELEASE: the reverse-release law of BIG-CBF's fallback (:func:`release_velocity`, closed loop: regenerated
+  from the rollout's position and the predicted obstacles at every step).
+
+At every control tick: u_nom = the GOAL feedback law (Eq. 8). The library is rolled out from the state after
+one control step of u_nom (velocity that of u_nom, obstacles predicted from T_C). If at least one policy is
+safe there (min h >= 0), u_nom is executed (mode NOMINAL). Otherwise the library is rolled out from the current
+state (current measured velocity) and the certified policy with the best value is executed (its first command;
+mode = its name). Value = goal progress of the rollout, ||p_0 - p_g|| - ||p_K - p_g|| [m], ties to the larger
+min h. If nothing is certified, the policy with the largest min h (the least violating) is executed.
+The authors select by a minimum-intervention QP; with a holonomic first-order base the library's first commands
+are the candidate inputs, so the selection above is the discrete counterpart (documented choice).
+Deterministic.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...params.stack import StackParams
+from ...types import Obstacles, RobotState
+from ..behaviors import behavior_command, goal_basis, release_velocity
+from ..planner import PlanInfo
+from ..uncertainty import nominal_velocity
+from .common import at_goal, body_from_world, clip_command, predict, world_velocity
+from .shield import one_step, rollout
+
+
+@dataclass(frozen=True)
+class PlCbfParams:
+    n_dir: int = 8                 # directional policies [-]
+    v_dir_mps: float = 0.5         # speed of a directional policy [m/s]
+    t_move_s: float = 1.0          # how long a directional policy moves before stopping [s]
+    a_max_mps2: float = 2.0        # acceleration limit of the rollouts [m/s^2]
+
+
+class PolicyLibrary:
+    """The fallback library as one batched policy: rows = (STOP, DIR-0..DIR-n-1, RELEASE) x candidates."""
+
+    def __init__(self, params: StackParams, pl: PlCbfParams, goal: np.ndarray, obstacles: Obstacles):
+        self.params, self.pl, self.goal, self.obstacles = params, pl, goal, obstacles
+        self.names = ("STOP",) + tuple(f"DIR-{j}" for j in range(pl.n_dir)) + ("RELEASE",)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def directions(self, p0: np.ndarray) -> np.ndarray:
+        """Unit world directions (n_dir, 2): the goal direction from p0 rotated by 2 pi j / n_dir."""
+        d_g, _, dist = goal_basis(p0, self.goal)
+        base = np.arctan2(d_g[1], d_g[0]) if dist > 1e-9 else 0.0
+        a = base + 2 * np.pi * np.arange(self.pl.n_dir) / self.pl.n_dir
+        return np.stack([np.cos(a), np.sin(a)], -1)
+
+    def policy(self, p0: np.ndarray):
+        """The library as a Policy over rows grouped by candidate: row c * L + l is policy l from candidate c."""
+        L, dt = len(self), self.params.dt_s
+        dirs = self.directions(p0)
+        obs = self.obstacles
+
+        def pi(k: int, p: np.ndarray, obs_p: np.ndarray) -> np.ndarray:
+            out = np.zeros_like(p).reshape(-1, L, 2)
+            if k * dt < self.pl.t_move_s - 1e-9:
+                out[:, 1:1 + self.pl.n_dir] = self.pl.v_dir_mps * dirs[None]
+            prow = p.reshape(-1, L, 2)[:, -1]
+            out[:, -1] = release_velocity(prow, self.goal, obs_p, obs.r, self.params, obs.v)
+            return out.reshape(-1, 2)
+        return pi
+
+
+class PlCbfPlanner:
+    """PL-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
+
+    name = "pl-cbf"
+
+    def __init__(self, params: StackParams, pl: PlCbfParams = PlCbfParams()):
+        self.params, self.pl = params, pl
+        self.last_h_min: np.ndarray | None = None
+
+    def reset(self, seed: int) -> None:
+        self.last_h_min = None
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        p = self.params
+        goal = np.asarray(goal, float).reshape(2)
+        if at_goal(state, goal, p):
+            return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
+        lib = PolicyLibrary(p, self.pl, goal, obstacles)
+        L = len(lib)
+        u_nom = behavior_command("GOAL", state, obstacles, goal, p)
+        # 1) is the state after one step of the nominal certified by some library policy?
+        p1 = one_step(state.p, state.theta, u_nom, p)
+        v1 = nominal_velocity(state.theta, u_nom, p.uncertainty.execution)
+        ro = rollout(np.tile(p1, (L, 1)), np.tile(v1, (L, 1)), state.theta, lib.policy(p1),
+                     predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2)
+        if np.any(ro.h_min >= 0.0):
+            self.last_h_min = ro.h_min
+            return (clip_command(u_nom, p),
+                    PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, ro.p[int(np.argmax(ro.h_min))]))
+        # 2) otherwise execute the best certified library policy from the current state
+        ro = rollout(np.tile(state.p, (L, 1)), np.tile(world_velocity(state), (L, 1)), state.theta,
+                     lib.policy(state.p), predict(obstacles, p), p, self.pl.a_max_mps2)
+        self.last_h_min = ro.h_min
+        ok = ro.h_min >= 0.0
+        if ok.any():
+            value = np.hypot(*(state.p - goal)) - np.hypot(*(ro.p[:, -1] - goal).T)
+            order = np.lexsort((-ro.h_min, -value))              # best value first, ties: larger h_min
+            j = int(order[ok[order]][0])
+            mode = lib.names[j]
+        else:
+            j = int(np.argmax(ro.h_min))
+            mode = lib.names[j] + "-UNCERTIFIED"
+        u = clip_command(body_from_world(state.theta, ro.v_cmd[j, 0]), p)
+        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, ro.p[j])

@@ -1,0 +1,62 @@
+"""Closed-loop fallback-policy rollouts shared by the two policy shields (backup-CBF and PL-CBF).
+
+A fallback policy maps (step k, robot positions (B, 2), predicted obstacles O^k) to commanded world
+velocities (B, 2). The rollout tracks the command with an acceleration limit ``a_max`` (the robot cannot stop
+instantly: :func:`~bigcbf.control.baselines.common.accel_limited`), realizes it through the nominal execution
+model of Eq. (1) (A, d; the yaw is held, wz = 0) and moves with the reached velocity (semi-implicit Euler):
+
+    v_{k+1} = accel_limited(v_k, pi(k, p_k, O^k)),   p_{k+1} = p_k + dt R(theta)(A_xy R(theta)^T v_{k+1} + d_xy).
+
+Safety of a rollout is the shared barrier h_i^k >= 0 (Eq. 14, D_i with kappa_exec and m_i of Eq. 15 at the
+rollout command) for every obstacle i and every state k = 0..K against the shared prediction (Eqs. 2-3).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ...params.stack import StackParams
+from ..uncertainty import nominal_velocity
+from .common import Prediction, accel_limited, barrier_along, body_from_world
+
+Policy = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Rollout:
+    p: np.ndarray        # (B, K+1, 2) positions [m]
+    v_cmd: np.ndarray    # (B, K, 2) commanded world velocities [m/s]
+    u: np.ndarray        # (B, K, 3) body commands realizing v_cmd
+    h_min: np.ndarray    # (B,) min over k = 0..K and i of h_i^k [m^2] (+inf without obstacles)
+
+
+def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: Prediction,
+            params: StackParams, a_max: float) -> Rollout:
+    """Roll B closed-loop policies out from positions p0 (B, 2) and world velocities v0 (B, 2) over the
+    prediction's horizon (see the module docstring); ``policy`` returns (B, 2) commands for all rows."""
+    K, dt = pred.p.shape[0] - 1, params.dt_s
+    ex = params.uncertainty.execution
+    p = np.array(np.broadcast_to(p0, np.shape(v0)), float)
+    v = np.array(v0, float)
+    B = len(p)
+    P = np.empty((B, K + 1, 2))
+    Vc = np.empty((B, K, 2))
+    P[:, 0] = p
+    for k in range(K):
+        cmd = policy(k, p, pred.p[k])
+        Vc[:, k] = cmd
+        v = accel_limited(v, cmd, a_max, dt)
+        p = p + dt * nominal_velocity(theta, body_from_world(theta, v), ex)
+        P[:, k + 1] = p
+    U = body_from_world(theta, Vc)
+    h = barrier_along(P, np.full((B, K + 1), theta), U, pred, params)
+    h_min = h.min(axis=(1, 2)) if pred.M else np.full(B, np.inf)
+    return Rollout(P, Vc, U, h_min)
+
+
+def one_step(p: np.ndarray, theta: float, u_body: np.ndarray, params: StackParams) -> np.ndarray:
+    """The position after one control period T_C under u (Eq. 1, nominal): p + T_C R(theta)(A u + d)."""
+    return np.asarray(p, float) + params.T_C_s * nominal_velocity(theta, np.asarray(u_body, float),
+                                                                  params.uncertainty.execution)

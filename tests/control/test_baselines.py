@@ -1,0 +1,169 @@
+"""The five comparison methods (issue 6): open space -> towards the goal; one obstacle -> finite and inside the
+bounds; determinism per seed; the formulas of each method against hand computations."""
+import numpy as np
+import pytest
+
+from bigcbf.control import METHODS, PlanInfo, Planner
+from bigcbf.control.baselines import BASELINES
+from bigcbf.control.baselines.apf import ApfParams, attractive_velocity, repulsive_velocity
+from bigcbf.control.baselines.backup_cbf import BackupCbfPlanner
+from bigcbf.control.baselines.common import accel_limited, barrier_along, integrate, predict
+from bigcbf.control.baselines.dwa import DwaParams, window_samples
+from bigcbf.control.baselines.mppi import MppiPlanner, mppi_weights
+from bigcbf.control.baselines.pl_cbf import PlCbfPlanner
+from bigcbf.control.baselines.shield import rollout
+from bigcbf.params import SIMULATION
+from bigcbf.types import Obstacles, RobotState
+
+P = SIMULATION
+NEW = ("backup-cbf", "pl-cbf", "apf", "dwa", "mppi")
+GOAL = np.array([4.0, 0.0])
+LO, HI = np.asarray(P.u_min), np.asarray(P.u_max)
+
+
+def test_all_eight_registered():
+    assert set(METHODS.names()) == {"big-cbf", "big-cbf-noshared", "cbf-only", *NEW}
+    for name in NEW:
+        pl = METHODS.get(name)(P)
+        assert isinstance(pl, Planner) and pl.name == name and BASELINES[name] is type(pl)
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_open_space_drives_toward_goal(name):
+    pl = METHODS.get(name)(P)
+    pl.reset(0)
+    theta = 0.4
+    state = RobotState(0.0, 0.0, theta, 0.5 * np.cos(theta), -0.5 * np.sin(theta))   # moving at 0.5 m/s along +x
+    for k in range(3):   # MPPI: also the ticks that follow its sequence
+        u, info = pl.plan(0.05 * k, state, Obstacles.empty(), GOAL)
+        assert isinstance(info, PlanInfo) and u.shape == (3,)
+        c, s = np.cos(theta), np.sin(theta)
+        v_world = np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+        assert v_world[0] > 0.3, (name, u)           # goal-ward speed (MPPI's first samples also wander sideways)
+        assert np.all(u >= LO - 1e-12) and np.all(u <= HI + 1e-12)
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_one_obstacle_grid_finite_and_bounded(name):
+    pl = METHODS.get(name)(P)
+    obs = Obstacles.from_lists([[1.0, 0.0]], v=[[-0.6, 0.3]], r=0.3, cov=np.eye(2) * 0.01)
+    for x in (-0.5, 0.2, 0.5, 0.8, 1.0, 1.6):          # includes the robot on (and inside) the obstacle
+        for y in (-0.6, 0.0, 0.4):
+            for theta in (0.0, 2.5):
+                pl.reset(1)
+                st = RobotState(x, y, theta, 0.3, -0.2, 0.1)
+                u, info = pl.plan(0.0, st, obs, GOAL)
+                assert np.all(np.isfinite(u)), (name, x, y, u)
+                assert np.all(u >= LO - 1e-12) and np.all(u <= HI + 1e-12), (name, u)
+                assert np.hypot(u[0], u[1]) <= P.v_max_mps + 1e-9
+                assert np.isfinite(info.planner_ms)
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_deterministic_per_seed(name):
+    obs = Obstacles.from_lists([[1.2, 0.1], [2.0, -0.8]], v=[[0, 0], [0, 0.8]], r=0.3, cov=np.eye(2) * 0.01)
+    runs = []
+    for _ in range(2):
+        pl = METHODS.get(name)(P)
+        pl.reset(7)
+        runs.append(np.array([pl.plan(0.05 * k, RobotState(0.05 * k, 0, 0), obs, GOAL)[0] for k in range(12)]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_mppi_seed_matters_and_rate():
+    obs = Obstacles.from_lists([[1.2, 0.1]], r=0.3)
+    a, b = MppiPlanner(P), MppiPlanner(P)
+    a.reset(0)
+    b.reset(1)
+    ua, ia = a.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    ub, _ = b.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert ia.planned and not np.array_equal(ua, ub)
+    planned = [a.plan(0.05 * k, RobotState(0, 0, 0), obs, GOAL)[1].planned for k in range(1, 21)]
+    assert planned == [k % 10 == 0 for k in range(1, 21)]             # 2 Hz at a 20 Hz control rate
+    # between updates the sequence is followed, time-indexed: at t = 1.0 + 0.25 (last update at 1.0) k = 2 (dt 0.1)
+    u, info = a.plan(1.25, RobotState(0, 0, 0), obs, GOAL)
+    assert not info.planned
+    np.testing.assert_allclose(u[:2], a.V[2])
+
+
+def test_mppi_weights_by_hand():
+    # S = (1, 2, 3), lambda = 1: exp(0), exp(-1), exp(-2) normalized
+    z = np.array([1.0, np.exp(-1), np.exp(-2)])
+    np.testing.assert_allclose(mppi_weights(np.array([1.0, 2.0, 3.0]), 1.0), z / z.sum())
+    np.testing.assert_allclose(mppi_weights(np.array([5.0, 5.0]), 0.1), [0.5, 0.5])
+
+
+def test_apf_gradients_by_hand():
+    ap = ApfParams(k_att_per_s=1.0, d_conic_m=0.8, k_rep_m3_per_s=0.01, rho0_m=0.6)
+    # quadratic zone: e = (0.3, 0.4), |e| = 0.5 < 0.8 -> k_att e
+    np.testing.assert_allclose(attractive_velocity([0, 0], [0.3, 0.4], ap), [0.3, 0.4])
+    # conic zone: e = (3, 4), |e| = 5 -> 0.8 e / 5 = (0.48, 0.64)
+    np.testing.assert_allclose(attractive_velocity([0, 0], [3, 4], ap), [0.48, 0.64])
+    # obstacle at (1, 0), D = 0.5: rho = 0.5; 0.01 (1/0.5 - 1/0.6) / 0.25 = 0.01 * 0.3333 / 0.25 = 0.013333, along -x
+    np.testing.assert_allclose(repulsive_velocity([0, 0], [[1.0, 0.0]], [0.5], ap), [-0.0133333333, 0.0], rtol=1e-6)
+    # beyond rho_0: nothing
+    np.testing.assert_allclose(repulsive_velocity([0, 0], [[2.0, 0.0]], [0.5], ap), [0.0, 0.0])
+
+
+def test_dwa_window_by_hand():
+    dp = DwaParams(acc_xy_mps2=2.0, acc_wz_radps2=3.0, window_s=0.25, n_xy=3, n_wz=3)
+    U = window_samples(RobotState(0, 0, 0, 0.2, 0.0, 0.0), P, dp)
+    # vx in [0.2 - 0.5, 0.2 + 0.5] = [-0.3, 0.7], vy in [-0.5, 0.5], wz in [-0.75, 0.75]; 27 + the stop command
+    assert len(U) == 28 and np.array_equal(U[-1], np.zeros(3))
+    assert U[:, 0].min() == pytest.approx(-0.3) and U[:, 2].max() == pytest.approx(0.75)
+    # (0.7, 0.5) is outside the 0.8 m/s disc: scaled to 0.8 / hypot(0.7, 0.5) = 0.8 / 0.86023
+    corner = U[np.argmax(U[:, 0] + U[:, 1])]
+    np.testing.assert_allclose(corner[:2], np.array([0.7, 0.5]) * 0.8 / np.hypot(0.7, 0.5))
+
+
+def test_integrate_and_barrier_by_hand():
+    # u = (0.5, 0, 0) at theta = pi/2 for 2 steps of 0.1 s: +y by 0.05 m per step
+    p, th = integrate(RobotState(1.0, 2.0, np.pi / 2), np.tile([0.5, 0.0, 0.0], (1, 2, 1)), 0.1, P)
+    np.testing.assert_allclose(p[0], [[1.0, 2.0], [1.0, 2.05], [1.0, 2.10]], atol=1e-12)
+    # barrier at k = 0 against a static obstacle at (1, 3), r = 0.2, cov 0, static:
+    # m = |v_rob| tau95 + e_exec + e_zoh = 0.5*0.1 + 0.15*(0.02 + 0.02*0.5/0.8) + 0.025 = 0.05 + 0.004875 + 0.025
+    # D = 0.15 + 0.2 + 0.1 + 0.079875 = 0.529875; h = 1 - D^2
+    obs = Obstacles.from_lists([[1.0, 3.0]], r=0.2)
+    h = barrier_along(p, th, np.tile([0.5, 0.0, 0.0], (1, 2, 1)), predict(obs, P, 2, 0.1), P)
+    assert h[0, 0, 0] == pytest.approx(1.0 - 0.529875 ** 2)
+    assert h[0, 2, 0] == pytest.approx(0.9 ** 2 - 0.529875 ** 2)
+
+
+def test_accel_limited_and_brake_rollout_by_hand():
+    # from 0.8 m/s towards 0 with 2 m/s^2 over 0.1 s: 0.6 m/s
+    np.testing.assert_allclose(accel_limited(np.array([[0.8, 0.0]]), np.zeros((1, 2)), 2.0, 0.1), [[0.6, 0.0]])
+    # braking from 0.8 m/s: speeds 0.6, 0.4, 0.2, 0 -> positions 0.06, 0.10, 0.12, 0.12, ...
+    ro = rollout(np.zeros((1, 2)), np.array([[0.8, 0.0]]), 0.0, lambda k, p, o: np.zeros_like(p),
+                 predict(Obstacles.empty(), P, 6, 0.1), P, 2.0)
+    np.testing.assert_allclose(ro.p[0, :, 0], [0.0, 0.06, 0.10, 0.12, 0.12, 0.12, 0.12], atol=1e-12)
+    assert ro.h_min[0] == np.inf
+
+
+def test_backup_cbf_keeps_nominal_far_and_intervenes_near():
+    pl = BackupCbfPlanner(P)
+    far = Obstacles.from_lists([[3.0, 0.0]], r=0.3)
+    u, info = pl.plan(0.0, RobotState(0, 0, 0), far, GOAL)
+    assert info.mode == "NOMINAL"
+    np.testing.assert_allclose(u, [0.8, 0.0, 0.0])
+    # obstacle 0.7 m ahead, r 0.3. Stopped at the end of the brake, m = 0.15 * 0.02 + 0.025 = 0.028, so
+    # D = 0.15 + 0.3 + 0.1 + 0.028 = 0.578 m.
+    # lambda = 0: one step at 0.8 -> 0.04, brake 0.6, 0.4, 0.2, 0 -> 0.10, 0.14, 0.16: 0.7 - 0.16 = 0.54 < D: unsafe
+    # lambda = 0.25: 0.6 m/s -> 0.03, brake 0.4, 0.2, 0 -> 0.07, 0.09: 0.7 - 0.09 = 0.61 > D: certified
+    near = Obstacles.from_lists([[0.7, 0.0]], r=0.3)
+    u, info = pl.plan(0.0, RobotState(0, 0, 0), near, GOAL)
+    assert info.mode == "BLEND"
+    np.testing.assert_allclose(u, [0.6, 0.0, 0.0])
+    assert pl.last_h_min[0] < 0.0 <= pl.last_h_min[1]
+    assert info.path[-1, 0] == pytest.approx(0.09)
+
+
+def test_pl_cbf_keeps_nominal_far_and_picks_a_certified_policy_near():
+    pl = PlCbfPlanner(P)
+    u, info = pl.plan(0.0, RobotState(0, 0, 0), Obstacles.from_lists([[3.0, 0.0]], r=0.3), GOAL)
+    assert info.mode == "NOMINAL"
+    np.testing.assert_allclose(u, [0.8, 0.0, 0.0])
+    # a pedestrian 1 m ahead walking at the robot at 1 m/s: continuing the nominal cannot be certified
+    obs = Obstacles.from_lists([[1.0, 0.0]], v=[[-1.0, 0.0]], r=0.25)
+    u, info = pl.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert info.mode != "NOMINAL"
+    assert not (u[0] > 0.5 and abs(u[1]) < 0.1)      # not driving on towards it
