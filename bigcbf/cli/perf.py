@@ -13,6 +13,7 @@ BENCHES = [
     "bigcbf.control.perf:bench",
     "bigcbf.control.baselines.perf:bench",
     "bigcbf.episode_perf:bench",
+    "twin.perf:bench",
 ]
 
 

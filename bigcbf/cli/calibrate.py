@@ -1,0 +1,57 @@
+"""bigcbf calibrate: the shared-uncertainty terms of Eq. (15) (tau95, A, d, e_exec, e_ZOH) from a robot log."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+HELP = "calibrate tau95, the execution model (A, d, residual bound e_exec) and e_ZOH from a robot log"
+
+
+def _coverage(s: str) -> float:
+    import argparse
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+    if not 0.5 <= v < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a coverage in [0.5, 1), got {v}")
+    return v
+
+
+def add_arguments(p):
+    p.add_argument("log", type=Path, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
+    p.add_argument("--out", type=Path, default=None, metavar="PROFILE.toml",
+                   help="write the uncertainty profile (use with bigcbf run --profile)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--report", type=Path, default=None, metavar="DIR", help="write plots and calibration.json here")
+    p.add_argument("--cmd-topic", default=None, help="command topic (Twist/TwistStamped; default: found by type)")
+    p.add_argument("--odom-topic", default=None, help="odometry topic (nav_msgs/Odometry; default: found by type)")
+    p.add_argument("--scan-topic", default=None, help="laser scan topic for the perception latency (default: by type)")
+    p.add_argument("--no-scan", action="store_true", help="ignore scans (tau95 = actuation delay only)")
+    p.add_argument("--coverage", type=_coverage, default=0.95, help="stated coverage of the residual bound (0.95)")
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from twin.calibrate import CalibrationOptions, calibrate_series, read_log, summary_lines, write_profile
+
+    opt = CalibrationOptions()
+    opt = replace(opt, residual=replace(opt.residual, coverage=args.coverage))
+    data = read_log(args.log, args.cmd_topic, args.odom_topic, args.scan_topic, use_scan=not args.no_scan)
+    cal = calibrate_series(data, opt)
+    written = []
+    if args.out is not None:
+        written.append(write_profile(cal, args.out))
+    if args.report is not None:
+        from twin.report import write_report
+        written += write_report(cal, args.report, data.cmd.t, data.cmd.u)
+    if args.json:
+        out = cal.to_json()
+        out["written"] = [str(p) for p in written]
+        print(json.dumps(out))
+    else:
+        print("\n".join(summary_lines(cal)))
+        for p in written:
+            print(f"wrote {p}")
+    return 0

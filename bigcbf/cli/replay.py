@@ -1,0 +1,76 @@
+"""bigcbf replay: drive the MuJoCo model with a log's commands and compare with its odometry."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+HELP = "replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted); errors, video"
+
+
+def add_arguments(p):
+    p.add_argument("log", type=Path, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
+    p.add_argument("--profile", type=Path, default=None, metavar="PROFILE.toml",
+                   help="uncertainty profile whose execution model (A, d) is replayed (default: calibrate the log)")
+    p.add_argument("--video", type=Path, default=None, metavar="PATH.mp4",
+                   help="top view with the logged and simulated paths (H.264 MP4)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--fit", action="store_true",
+                   help="also fit the model's latency, gains and floor friction to the log (slow: ~40 replays)")
+    p.add_argument("--window", type=float, default=5.0, metavar="S", help="pose-drift window in seconds (5)")
+    p.add_argument("--cmd-topic", default=None, help="command topic (default: found by type)")
+    p.add_argument("--odom-topic", default=None, help="odometry topic (default: found by type)")
+    p.add_argument("--save-robot-profile", type=Path, default=None, metavar="PATH.toml",
+                   help="write the calibrated (or fitted) simulator robot profile (for bigcbf record calibration)")
+
+
+def _execution(path: Path):
+    from ..errors import UserError
+    from ..params.stack import load_stack_params
+    from ..params.toml_io import load_toml
+
+    raw = load_toml(path)
+    if "execution" not in raw.get("uncertainty", {}):
+        raise UserError("has no [uncertainty.execution] table (A, d): not a calibrated profile", file=str(path),
+                        field="uncertainty.execution")
+    return load_stack_params(path).uncertainty.execution
+
+
+def run(args) -> int:
+    from ..errors import UserError
+    from ..params.toml_io import save
+
+    if not args.window > 0:
+        raise UserError(f"expected a window > 0 s, got {args.window}", field="--window")
+    for path, what in ((args.video, "video"), (args.save_robot_profile, "robot profile")):
+        if path is not None and path.is_dir():
+            raise UserError(f"{what} path is a directory", file=str(path))
+    execution = _execution(args.profile) if args.profile is not None else None
+    from twin.calibrate import read_log
+    from twin.replay import ReplayOptions, replay
+
+    data = read_log(args.log, args.cmd_topic, args.odom_topic, use_scan=False)
+    res = replay(data, execution, ReplayOptions(window_s=args.window, fit=args.fit), video=args.video)
+    best = res.runs.get("fitted", res.runs["calibrated"])
+    if args.save_robot_profile is not None:
+        save(best.profile, args.save_robot_profile,
+             header=f"Simulator robot profile ({best.name}) that replays {args.log}; from `bigcbf replay`.")
+    if args.json:
+        print(json.dumps(res.to_json()))
+        return 0
+    print(f"replay of {args.log}: velocity RMSE (vx m/s, vy m/s, wz rad/s) and pose drift over {args.window:g} s "
+          f"windows, simulated odometry vs logged")
+    print(f"{'model':<11} {'rmse vx':>8} {'rmse vy':>8} {'rmse wz':>8} {'drift mean':>11} {'drift max':>10} "
+          f"{'yaw mean':>9} {'final err':>10}")
+    for name, r in res.runs.items():
+        print(f"{name:<11} {r.rmse[0]:8.4f} {r.rmse[1]:8.4f} {r.rmse[2]:8.4f} {r.drift_mean_m:10.3f}m "
+              f"{r.drift_max_m:9.3f}m {r.yaw_drift_mean_rad:8.3f}r {r.final_error_m:9.3f}m")
+    p = best.profile
+    print(f"{best.name} profile: latency {p.latency_s:.3f} s, gain diag "
+          f"{', '.join(f'{p.gain[j][j]:.3f}' for j in range(3))}, bias {', '.join(f'{x:+.3f}' for x in p.bias)}"
+          + (f", floor friction {p.floor_friction:.3f}" if p.floor_friction is not None else ""))
+    for n in res.notes:
+        print(f"note: {n}")
+    for path in (args.video, args.save_robot_profile):
+        if path is not None:
+            print(f"wrote {path}")
+    return 0

@@ -1,0 +1,104 @@
+"""Execution model of Eq. (1) (twin.execution): least squares, identified axes, saturation, settled samples."""
+import numpy as np
+
+from twin.execution import (ExecutionOptions, fit_execution, identified_axes, least_squares, runs_at_least,
+                            saturated_samples, settled_samples)
+
+A_TRUE = np.array([[0.9, 0.05, 0.0], [-0.03, 0.85, 0.01], [0.1, 0.0, 0.95]])
+D_TRUE = np.array([0.02, -0.01, 0.03])
+
+
+def test_least_squares_is_exact_on_noiseless_data():
+    rng = np.random.default_rng(0)
+    u = rng.uniform(-1, 1, (200, 3))
+    v = u @ A_TRUE.T + D_TRUE                    # Eq. (1) without residual
+    A, d = least_squares(u, v, np.array([True, True, True]))
+    np.testing.assert_allclose(A, A_TRUE, atol=1e-12)
+    np.testing.assert_allclose(d, D_TRUE, atol=1e-12)
+
+
+def test_least_squares_by_hand_one_axis():
+    # v = 2 u + 1 through (0, 1), (1, 3), (2, 5): slope 2, intercept 1; vy, wz not identified
+    u = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    v = np.array([[1.0, 0, 0], [3.0, 0, 0], [5.0, 0, 0]])
+    A, d = least_squares(u, v, np.array([True, False, False]))
+    np.testing.assert_allclose(A, [[2, 0, 0], [0, 1, 0], [0, 0, 1]], atol=1e-12)
+    np.testing.assert_allclose(d, [1, 0, 0], atol=1e-12)
+
+
+def test_differential_drive_vy_is_not_identified_and_not_guessed():
+    rng = np.random.default_rng(1)
+    u = rng.uniform(-0.5, 0.5, (500, 3))
+    u[:, 1] = 0.0                                     # a differential drive never commands vy
+    v = u @ A_TRUE.T + D_TRUE + rng.normal(0, 0.01, (500, 3))
+    axes = identified_axes(u)
+    np.testing.assert_array_equal(axes, [True, False, True])
+    fit = fit_execution(np.arange(500) * 0.02, u, v)
+    np.testing.assert_array_equal(fit.A[1], [0, 1, 0])            # identity row
+    assert fit.d[1] == 0.0
+    assert fit.A[0, 1] == 0.0 and fit.A[2, 1] == 0.0               # no coefficient on the unexcited input
+    np.testing.assert_allclose(fit.A[[0, 2]][:, [0, 2]], A_TRUE[[0, 2]][:, [0, 2]], atol=0.02)
+
+
+def test_excitation_thresholds():
+    u = np.zeros((100, 3))
+    u[::2, 0] = 0.3                                    # std 0.15, 50 samples >= 0.05: identified
+    u[:20, 2] = 0.5                                    # only 20 samples beyond 0.1 rad/s: not identified
+    np.testing.assert_array_equal(identified_axes(u, ExecutionOptions(min_samples=50)), [True, False, False])
+
+
+def test_runs_at_least_by_hand():
+    t = np.arange(10) * 0.1
+    flag = np.array([0, 1, 1, 1, 1, 0, 1, 1, 0, 1], bool)
+    # run 1..4 spans 0.3 s (kept with min 0.3), run 6..7 spans 0.1 s, run 9 spans 0
+    np.testing.assert_array_equal(runs_at_least(flag, t, 0.3), [0, 1, 1, 1, 1, 0, 0, 0, 0, 0])
+
+
+def test_saturated_samples_are_found_and_left_out():
+    rng = np.random.default_rng(3)
+    n = 3000
+    t = np.arange(n) * 0.02
+    u = np.repeat(rng.uniform(-0.6, 0.6, (n // 50, 3)), 50, axis=0)    # 1-s holds
+    big = np.repeat(rng.random(n // 50) < 0.15, 50)                     # some holds demand too much ...
+    u[big, 0] = 1.6
+    v = u @ A_TRUE.T + D_TRUE + rng.normal(0, 0.01, (n, 3))
+    v[big] *= 0.6                                                       # ... and the drive delivers 60 %
+    fit = fit_execution(t, u, v)
+    assert fit.saturated[big].mean() > 0.9 and fit.saturated[~big].mean() < 0.01
+    np.testing.assert_allclose(fit.A, A_TRUE, atol=0.01)
+    np.testing.assert_allclose(fit.d, D_TRUE, atol=0.005)
+    # a brief dip (one sample) is not saturation
+    v2 = u @ A_TRUE.T + D_TRUE
+    v2[100] *= 0.2
+    sat = saturated_samples(t, u, v2, A_TRUE, D_TRUE, np.array([True] * 3))
+    assert not sat.any()
+
+
+def test_settled_samples_by_hand():
+    t_cmd = np.arange(0, 2, 0.05)
+    u = np.zeros((len(t_cmd), 3))
+    u[t_cmd >= 1.0, 0] = 0.5
+    u[t_cmd >= 1.6, 2] = 0.01                          # below hold_tol on wz (0.04 rad/s): still held
+    ta = np.array([0.2, 0.99, 1.0, 1.29, 1.3, 1.7])
+    # settle 0.3 s: held over [t - 0.3, t]; before 0.3 s the window starts before the first command
+    np.testing.assert_array_equal(settled_samples(t_cmd, u, ta, ExecutionOptions(settle_s=0.3)),
+                                  [False, True, False, False, True, True])
+
+
+def test_fit_uses_settled_samples_when_there_are_enough():
+    rng = np.random.default_rng(4)
+    n = 2000
+    t = np.arange(n) * 0.02
+    u = rng.uniform(-0.5, 0.5, (n, 3))
+    v = u @ A_TRUE.T + D_TRUE
+    settled = np.zeros(n, bool)
+    settled[::4] = True
+    v[~settled] = 0.0                                  # garbage everywhere but the settled samples
+    fit = fit_execution(t, u, v, settled=settled)
+    assert fit.settled_only and fit.n_used == settled.sum()
+    np.testing.assert_allclose(fit.A, A_TRUE, atol=1e-9)
+    few = np.zeros(n, bool)
+    few[:10] = True
+    fit = fit_execution(t, u, u @ A_TRUE.T + D_TRUE, settled=few)
+    assert not fit.settled_only
+    np.testing.assert_allclose(fit.predict(u[:3]), u[:3] @ A_TRUE.T + D_TRUE, atol=1e-9)

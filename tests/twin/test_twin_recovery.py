@@ -1,0 +1,69 @@
+"""Recovery: record a calibration drive with a known profile in the simulator, calibrate, get the profile back.
+
+The twin measures the whole robot: the profile's imperfection layer *and* the model's own response (wheel
+dynamics, roller slip, the odometry's averaging over its 20 ms period). The latter is measured on the same
+program driven with the ideal profile, and the comparisons below name which of the two each one uses.
+"""
+import numpy as np
+import pytest
+
+from twin.calibrate import calibrate_log
+from twin.drive import DriveLimits, calibration_program
+
+
+@pytest.fixture(scope="module")
+def cals(profile_drive, ideal_drive):
+    return calibrate_log(profile_drive[0]), calibrate_log(ideal_drive)
+
+
+def test_drive_program_covers_the_axes_up_to_the_limits():
+    t, u = calibration_program(80.0, DriveLimits(), seed=0)
+    assert len(t) == 1600 and np.all(np.diff(t) == pytest.approx(0.05))
+    np.testing.assert_array_equal(u[:20], 0.0)                        # starts at rest
+    np.testing.assert_array_equal(u[-10:], 0.0)                       # ends at rest
+    assert np.abs(u[:, 0]).max() == pytest.approx(0.8) and np.abs(u[:, 1]).max() == pytest.approx(0.55)
+    assert np.abs(u[:, 2]).max() == pytest.approx(1.0)
+    assert np.hypot(u[:, 0], u[:, 1]).max() <= 0.8 + 1e-9
+    both = (np.abs(u[:, 0]) > 0.05) & (np.abs(u[:, 1]) > 0.05) & (np.abs(u[:, 2]) > 0.1)
+    assert both.mean() > 0.05                                         # combined motions
+
+
+def test_recording_stays_in_the_room_and_logs_every_topic(profile_drive):
+    _, summary = profile_drive
+    assert summary["messages"] == {"/odom": 4000, "/tf": 4000, "/ground_truth/odom": 4000, "/imu": 4000,
+                                   "/scan": 800, "/cmd_vel": 1600}
+    assert summary["max_distance_m"] < 3.4 and not summary["warnings"]
+
+
+def test_latency_recovered_within_15_ms(cals, profile):
+    cal, ideal = cals
+    # per command the profile delays by 0.08 + U(0, 0.02): mean 0.09 s, 95th percentile 0.099 s
+    mean_latency = profile.latency_s + profile.latency_jitter_s / 2
+    assert cal.delay.actuation_median_s - ideal.delay.actuation_median_s == pytest.approx(mean_latency, abs=0.015)
+    assert cal.delay.xcorr_s - ideal.delay.xcorr_s == pytest.approx(mean_latency, abs=0.015)
+    assert len(cal.delay.edge_delays_s) > 60
+    # tau95 adds the scan age at command time (scans 10 Hz, commands 20 Hz: 0 or 0.05 s)
+    assert cal.delay.perception_source == "header stamps"
+    assert cal.delay.actuation95_s < cal.delay.tau95_s <= cal.delay.actuation95_s + 0.05 + 1e-9
+
+
+def test_gains_and_bias_recovered(cals, profile):
+    cal, ideal = cals
+    gains = np.diag(np.asarray(profile.gain))
+    assert cal.fit.identified.all() and cal.counts["saturated"] < 0.05 * cal.counts["aligned"]
+    np.testing.assert_allclose(np.diag(cal.fit.A), gains, rtol=0.05)                     # the issue's 5 %
+    # relative to the model's own gains the profile's come out within 2 %
+    np.testing.assert_allclose(np.diag(cal.fit.A) / np.diag(ideal.fit.A), gains, rtol=0.02)
+    np.testing.assert_allclose(cal.fit.d, profile.bias, atol=0.02)
+    assert abs(cal.fit.d[0] - 0.02) < 0.005
+
+
+def test_residual_bound_held_out_coverage_within_3_points(cals):
+    cal, _ = cals
+    b = cal.bound
+    assert b.coverage == 0.95 and b.n_heldout > 200
+    assert b.coverage_heldout == pytest.approx(0.95, abs=0.03)
+    # the profile's residual is uniform within +-0.03 m/s per axis: ||r_xy|| <= 0.042 plus the odometry's noise
+    assert 0.03 < b.bound_knots.min() and b.bound_knots.max() < 0.09
+    # the calibrated model beats the nominal v = u(t) on the held-out samples, on every axis
+    assert np.all(cal.rmse_model < cal.rmse_nominal)

@@ -1,0 +1,56 @@
+"""A public ROS 1 log from another robot (TurtleBot3, differential drive, Gazebo; BSD, see the data README):
+calibrates without error, reports vy as not identified, and the fitted model predicts better than the identity."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bigcbf
+from bigcbf.cli import main
+from twin.calibrate import calibrate_log
+
+TURTLEBOT = Path(bigcbf.ROOT).parent / "shared/data/turtlebot3.bag"
+
+
+@pytest.fixture(scope="module")
+def cal():
+    return calibrate_log(TURTLEBOT)
+
+
+def test_topics_and_counts(cal):
+    assert cal.topics == {"commands": "/cmd_vel", "odometry": "/odom", "scans": "/scan"}
+    assert cal.counts["commands"] == 2335 and cal.counts["odometry"] == 2741 and cal.counts["scans"] == 457
+
+
+def test_vy_not_identified_and_not_guessed(cal):
+    np.testing.assert_array_equal(cal.fit.identified, [True, False, True])
+    np.testing.assert_array_equal(cal.fit.A[1], [0.0, 1.0, 0.0])
+    assert cal.fit.d[1] == 0.0 and cal.fit.A[0, 1] == 0.0 and cal.fit.A[2, 1] == 0.0
+    assert any("vy is not identified" in w for w in cal.warnings)
+    assert cal.execution_model().identified == (True, False, True)
+
+
+def test_fitted_model_beats_the_identity_model(cal):
+    """Held-out blocks: the calibrated model (delay, A, d) against the identity model v(t) = u(t)."""
+    for j in (0, 2):
+        assert cal.rmse_model[j] < cal.rmse_nominal[j]
+    assert np.sum(cal.rmse_model[[0, 2]] ** 2) < 0.7 * np.sum(cal.rmse_nominal[[0, 2]] ** 2)
+
+
+def test_delays_are_plausible_and_use_log_times(cal):
+    d = cal.delay
+    assert 0.05 < d.xcorr_s < 0.25                     # Gazebo's diff-drive plugin + the planner's output
+    assert d.perception_source == "header stamps"      # the stamps are on the log's clock here
+    assert d.tau95_s > d.actuation95_s                 # scans at 5 Hz add their age
+    assert cal.e_zoh_m == pytest.approx(cal.control_period_s * cal.speed_mps)
+    assert 0.9 < cal.bound.coverage_heldout <= 1.0
+
+
+def test_cli_json(capsys, tmp_path):
+    assert main(["calibrate", str(TURTLEBOT), "--json", "--out", str(tmp_path / "tb3.toml")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["identified"] == {"vx": True, "vy": False, "wz": True}
+    assert set(out) >= {"tau95_s", "A", "d", "e_exec", "e_zoh_m", "samples", "rmse_heldout"}
+    assert out["e_exec"]["coverage"] == 0.95 and out["samples"]["commands"] == 2335
+    assert (tmp_path / "tb3.toml").is_file()
