@@ -14,6 +14,7 @@ BENCHES = [
     "bigcbf.control.baselines.perf:bench",
     "bigcbf.episode_perf:bench",
     "twin.perf:bench",
+    "bigcbf.bench.perf:bench",
 ]
 
 

@@ -1,0 +1,66 @@
+"""The paper's reported benchmark numbers (Sec. IV-B), to print beside ours, and the paper's display order.
+
+Sources in ``paper/big-cbf.tex``:
+- Table II (``tab:overall_sim``): success %, time (s), clearance (m), E_CBF, CBF active %, QP infeasible % for
+  each of the eight methods, 450 episodes each (9 scenarios x 50 seeds).
+- The text of Sec. IV-B: zero collisions for every method; planner P95 for BIG-CBF (55.68 ms), MPPI (77.80 ms)
+  and DWA (2.12 ms); per-scenario success in required sidestepping, multi-static clutter and corridor meeting
+  ("BIG-CBF achieved 98% in corridor meeting, where all comparison methods achieved 100%").
+Numbers the paper does not give are ``None`` (never guessed).
+"""
+from __future__ import annotations
+
+#: Methods in the paper's Table II order (our registry names).
+METHOD_ORDER = ("cbf-only", "backup-cbf", "pl-cbf", "apf", "dwa", "mppi", "big-cbf-noshared", "big-cbf")
+
+#: Scenarios in the order of the paper's scenario figure (fig:simulation_scenarios), panels (a)-(i).
+SCENARIO_ORDER = ("blind_corner", "corridor_meeting", "single_person_crossing", "crowd_crossing", "delay_and_slip",
+                  "double_squeeze", "mixed_dense_traffic", "multi_static_clutter", "required_sidestepping")
+
+#: How the paper names each method.
+DISPLAY_NAME = {
+    "cbf-only": "CBF-only", "backup-cbf": "Backup-CBF + CBF", "pl-cbf": "PL-CBF + CBF", "apf": "APF + CBF",
+    "dwa": "DWA + CBF", "mppi": "MPPI + CBF", "big-cbf-noshared": "BIG-CBF-NoShared", "big-cbf": "BIG-CBF",
+}
+
+#: Table II columns, in our summary's keys.
+TABLE2_KEYS = ("success_pct", "time_s", "min_clearance_m", "e_cbf", "cbf_active_pct", "qp_infeasible_pct")
+
+_T2 = {  # success %, time s, clearance m, E_CBF, active %, QP infeasible %   (Table II, verbatim)
+    "cbf-only": (68.67, 15.13, 0.35, 7.03, 62.51, 0.04),
+    "backup-cbf": (76.00, 13.70, 0.35, 4.97, 39.06, 0.06),
+    "pl-cbf": (74.89, 14.51, 0.33, 6.08, 44.29, 0.08),
+    "apf": (82.44, 14.52, 0.51, 0.17, 14.73, 0.00),
+    "dwa": (93.78, 11.31, 0.41, 0.83, 30.24, 0.03),
+    "mppi": (83.33, 12.35, 0.41, 0.45, 36.94, 0.03),
+    "big-cbf-noshared": (98.89, 11.21, 0.52, 0.10, 15.64, 0.00),
+    "big-cbf": (99.78, 11.72, 0.55, 0.02, 9.10, 0.00),
+}
+_PLANNER_P95_MS = {"big-cbf": 55.68, "mppi": 77.80, "dwa": 2.12}
+
+#: The paper's aggregate numbers per method: Table II plus collisions (0 for all, text) and planner P95 (text).
+PAPER_TABLE_II: dict[str, dict[str, float | int | None]] = {
+    m: {**dict(zip(TABLE2_KEYS, v)), "collisions": 0, "planner_p95_ms": _PLANNER_P95_MS.get(m)}
+    for m, v in _T2.items()
+}
+
+#: Per-scenario success % quoted in the text of Sec. IV-B (the heatmap itself is not in the source).
+PAPER_SCENARIO_SUCCESS: dict[str, dict[str, float]] = {
+    "required_sidestepping": {"cbf-only": 50, "backup-cbf": 52, "pl-cbf": 52, "apf": 56, "dwa": 100, "mppi": 66,
+                              "big-cbf-noshared": 100, "big-cbf": 100},
+    "multi_static_clutter": {"cbf-only": 0, "backup-cbf": 0, "pl-cbf": 0, "apf": 0, "dwa": 68, "mppi": 2,
+                             "big-cbf-noshared": 94, "big-cbf": 100},
+    "corridor_meeting": {**{m: 100 for m in METHOD_ORDER}, "big-cbf": 98},
+}
+
+
+def display(method: str) -> str:
+    """The paper's name of a method (the registry name for methods the paper does not have)."""
+    return DISPLAY_NAME.get(method, method)
+
+
+def ordered(names, order) -> list[str]:
+    """``names`` sorted by their position in ``order``; names not in ``order`` keep their relative order, last."""
+    names = list(names)
+    rank = {n: i for i, n in enumerate(order)}
+    return sorted(names, key=lambda n: (rank.get(n, len(rank)), names.index(n)))

@@ -1,0 +1,316 @@
+"""Reports of a bench: episodes.csv, summary.json, summary.md, success_heatmap.png, cbf_burden.png.
+
+Aggregates (per method, and per method and scenario), over the episodes that ran without error:
+- ``success_pct``: 100 x successful episodes / episodes.
+- ``time_s``: mean completion time of the *successful* episodes (the time to reach the goal; a timeout's time is
+  the time limit and says nothing about speed). ``None`` when no episode succeeded.
+- ``min_clearance_m``: mean over episodes of the episode's minimum true clearance (surface distance - r_R).
+- ``e_cbf``: mean over episodes of E_CBF, Eq. (20) (a per-episode sum, as in the paper).
+- ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
+  over all control steps of all episodes of the group (the paper's "fraction of control steps").
+- ``collisions``, ``timeouts``: counts.
+- ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
+  (wall-clock figures: they depend on the machine and its load, unlike every other number here).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from ..errors import UserError
+from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, SCENARIO_ORDER, TABLE2_KEYS, display,
+                    ordered)
+
+KEY_FIELDS = ("scenario", "method", "seed", "params_hash", "scenario_sha")
+FIGURES = ("success_heatmap.png", "cbf_burden.png")
+DOCS_BEGIN = "<!-- bench-results:begin -->"
+DOCS_END = "<!-- bench-results:end -->"
+
+
+def _mean(xs: Sequence[float]) -> float | None:
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    return sum(xs) / len(xs) if xs else None
+
+
+def summarize(rows: Iterable[dict]) -> dict:
+    """The aggregate figures of a group of result rows (see the module docstring for the definitions)."""
+    rows = list(rows)
+    ok = [r["metrics"] for r in rows if r["status"] == "ok"]
+    n = len(ok)
+    steps = sum(int(m["control_steps"]) for m in ok)
+    active = sum(round(m["cbf_active_ratio"] * m["control_steps"]) for m in ok)
+    infeasible = sum(round(m["qp_infeasible_ratio"] * m["control_steps"]) for m in ok)
+    return {
+        "episodes": len(rows),
+        "ok": n,
+        "errors": len(rows) - n,
+        "success_pct": 100.0 * sum(bool(m["success"]) for m in ok) / n if n else None,
+        "time_s": _mean([m["time_s"] for m in ok if m["success"]]),
+        "min_clearance_m": _mean([m["min_clearance_m"] for m in ok]),
+        "e_cbf": _mean([m["e_cbf"] for m in ok]),
+        "cbf_active_pct": 100.0 * active / steps if steps else None,
+        "qp_infeasible_pct": 100.0 * infeasible / steps if steps else None,
+        "collisions": sum(bool(m["collision"]) for m in ok),
+        "timeouts": sum(bool(m["timeout"]) for m in ok),
+        "planner_p95_ms": _mean([m["planner_p95_ms"] for m in ok]),
+        "cbf_p95_ms": _mean([m["cbf_p95_ms"] for m in ok]),
+        "perception_p95_ms": _mean([m["perception_p95_ms"] for m in ok]),
+        "stopped_time_s": _mean([m["stopped_time_s"] for m in ok]),
+    }
+
+
+def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], seeds: Sequence[int],
+                  info: dict | None = None) -> dict:
+    """summary.json's content: figures keyed by method and by method then scenario, the paper's, and errors."""
+    by_m = {m: [r for r in rows if r["method"] == m] for m in methods}
+    versions = sorted({r["code_sha"] for r in rows if r["status"] == "ok" and r.get("code_sha")})
+    return {
+        "bench": {**(info or {}), "methods": list(methods), "scenarios": list(scenarios), "seeds": list(seeds),
+                  "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),
+                  "ok": sum(r["status"] == "ok" for r in rows), "errors": sum(r["status"] == "error" for r in rows),
+                  "code_versions": versions},
+        "methods": {m: summarize(by_m[m]) for m in methods},
+        "by_scenario": {m: {s: summarize(r for r in by_m[m] if r["scenario"] == s) for s in scenarios}
+                        for m in methods},
+        "paper": {"table_ii": {m: PAPER_TABLE_II[m] for m in METHOD_ORDER},
+                  "scenario_success_pct": PAPER_SCENARIO_SUCCESS},
+        "error_episodes": [{k: r[k] for k in ("scenario", "method", "seed", "error")}
+                           for r in rows if r["status"] == "error"],
+    }
+
+
+# --- episodes.csv --------------------------------------------------------------------------------------------------
+
+def write_csv(rows: Sequence[dict], path: Path) -> None:
+    """Every metric of every episode, one line each; lists and dicts (mode_history, warnings) as JSON text."""
+    metric_cols: list[str] = []
+    for r in rows:
+        for k in r["metrics"] or {}:
+            if k not in metric_cols and k not in KEY_FIELDS:
+                metric_cols.append(k)
+    cols = list(KEY_FIELDS) + ["status", "error"] + metric_cols + ["worker_wall_s", "host", "code_sha", "attempts"]
+    with Path(path).open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for r in rows:
+            m = r["metrics"] or {}
+            line = []
+            for c in cols:
+                v = m.get(c) if c in metric_cols else r.get(c)
+                line.append(json.dumps(v) if isinstance(v, (list, dict)) else ("" if v is None else v))
+            w.writerow(line)
+
+
+# --- summary.json / summary.md -------------------------------------------------------------------------------------
+
+def _clean(o):
+    """JSON without NaN/Infinity (strict parsers reject them): non-finite floats become null."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    return o
+
+
+def write_json(summary: dict, path: Path) -> None:
+    Path(path).write_text(json.dumps(_clean(summary), indent=2) + "\n")
+
+
+def _f(v, digits: int = 2) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    if isinstance(v, int) and not isinstance(v, bool):
+        return str(v)
+    return f"{v:.{digits}f}"
+
+
+def _table(header: Sequence[str], lines: Iterable[Sequence[str]], align: str | None = None) -> list[str]:
+    align = align or "l" + "r" * (len(header) - 1)
+    out = ["| " + " | ".join(header) + " |",
+           "|" + "|".join(":---" if a == "l" else "---:" for a in align) + "|"]
+    out += ["| " + " | ".join(line) + " |" for line in lines]
+    return out
+
+
+def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> str:
+    """summary.md: Table II's columns per method, success per scenario, the paper's numbers beside ours."""
+    h = "#" * level
+    b = summary["bench"]
+    methods, scenarios = b["methods"], b["scenarios"]
+    per_m, per_ms = summary["methods"], summary["by_scenario"]
+    n_seeds = len(b["seeds"])
+    lines = [f"{h} Benchmark results", ""]
+    lines.append(f"{b['episodes_recorded']} of {b['episodes_expected']} episodes recorded: {len(methods)} methods x "
+                 f"{len(scenarios)} scenarios x {n_seeds} seed{'s' if n_seeds != 1 else ''} (the same seeds for every "
+                 "method); "
+                 f"{b['ok']} ran, {b['errors']} crashed (recorded as errors, left out of the figures).")
+    names = {"perception": "perception", "params_hash": "parameter hash", "engine": "engine", "workers": "workers",
+             "runs": "invocations that ran episodes", "wall_time_s": "their wall time (s)",
+             "episodes_per_min": "episodes per minute"}
+    extra = [f"{label}: {b[k]}" for k, label in names.items() if b.get(k) is not None]
+    if extra:
+        lines += ["", "; ".join(extra) + "."]
+    if len(b.get("code_versions", [])) > 1:
+        lines += ["", f"**Warning:** these episodes ran with {len(b['code_versions'])} different versions of the code "
+                  f"({', '.join(b['code_versions'])}; column code_sha of episodes.csv); for consistent numbers, run "
+                  "again into a new --out."]
+    lines += ["", f"{h}# Aggregate performance (Table II columns)", ""]
+    lines += _table(["Method", "Episodes", "Success (%)", "Time (s)", "Clearance (m)", "E_CBF", "Active (%)",
+                     "QP infeas. (%)", "Collisions", "Planner P95 (ms)"],
+                    ([display(m), str(s["ok"]), _f(s["success_pct"]), _f(s["time_s"]), _f(s["min_clearance_m"]),
+                      _f(s["e_cbf"]), _f(s["cbf_active_pct"]), _f(s["qp_infeasible_pct"]), _f(s["collisions"]),
+                      _f(s["planner_p95_ms"])] for m in methods for s in [per_m[m]]))
+    lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (Eq. (20)): means over episodes. Active, "
+              "QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time.", ""]
+    lines += [f"{h}# Success per scenario (%)", ""]
+    lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
+                    ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
+    lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
+              f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
+    paper = summary["paper"]["table_ii"]
+    lines += [f"{h}# Ours beside the paper's Table II", "",
+              "Each pair is ours / the paper's (the paper: 450 episodes per method, its own simulator; collisions and "
+              "planner P95 from its text; – where the paper gives no number).", ""]
+    cols = [("Success (%)", "success_pct"), ("Time (s)", "time_s"), ("Clearance (m)", "min_clearance_m"),
+            ("E_CBF", "e_cbf"), ("Active (%)", "cbf_active_pct"), ("QP infeas. (%)", "qp_infeasible_pct"),
+            ("Collisions", "collisions"), ("Planner P95 (ms)", "planner_p95_ms")]
+    lines += _table(["Method"] + [c for c, _ in cols],
+                    ([display(m)] + [f"{_f(per_m[m][k])} / {_f(paper.get(m, {}).get(k))}" for _, k in cols]
+                     for m in methods))
+    quoted = [s for s in scenarios if s in summary["paper"]["scenario_success_pct"]]
+    if quoted:
+        pss = summary["paper"]["scenario_success_pct"]
+        lines += ["", "Success per scenario where the paper's text quotes it, ours / the paper's (%):", ""]
+        lines += _table(["Method"] + [s.replace("_", " ") for s in quoted],
+                        ([display(m)] + [f"{_f(per_ms[m][s]['success_pct'], 0)} / {_f(pss[s].get(m), 0)}"
+                                         for s in quoted] for m in methods))
+    errs = summary["error_episodes"]
+    if errs:
+        lines += ["", f"{h}# Episodes that crashed", ""]
+        lines += [f"- {e['scenario']} / {e['method']} / seed {e['seed']}: {e['error']}" for e in errs[:50]]
+        if len(errs) > 50:
+            lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
+    return "\n".join(lines) + "\n"
+
+
+# --- figures -------------------------------------------------------------------------------------------------------
+
+def plot_heatmap(summary: dict, path: Path) -> None:
+    """Method x scenario success rate, annotated in %, like the paper's Fig. 6."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    methods, scenarios = summary["bench"]["methods"], summary["bench"]["scenarios"]
+    z = np.array([[np.nan if (v := summary["by_scenario"][m][s]["success_pct"]) is None else v for s in scenarios]
+                  for m in methods], float)
+    fig, ax = plt.subplots(figsize=(max(6.5, 2.2 + 1.05 * len(scenarios)), 1.6 + 0.5 * len(methods)), dpi=150)
+    im = ax.imshow(z, cmap="RdYlGn", vmin=0, vmax=100, aspect="auto")
+    for i in range(len(methods)):
+        for j in range(len(scenarios)):
+            v = z[i, j]
+            ax.text(j, i, "–" if np.isnan(v) else f"{v:.0f}", ha="center", va="center", fontsize=9,
+                    color="black" if np.isnan(v) or 25 < v < 85 else "white", fontweight="bold")
+    ax.set_xticks(range(len(scenarios)), [s.replace("_", "\n") for s in scenarios], fontsize=8)
+    ax.set_yticks(range(len(methods)), [display(m) for m in methods], fontsize=9)
+    ax.tick_params(length=0)
+    n = len(summary["bench"]["seeds"])
+    ax.set_title(f"Success rate (%) per method and scenario\n({n} seed{'s' if n != 1 else ''} each, paired)",
+                 fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.03, pad=0.02, label="success (%)")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_burden(summary: dict, path: Path) -> None:
+    """Mean E_CBF and CBF-active % per method (bars), with the paper's Table II values (black diamonds)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    methods = summary["bench"]["methods"]
+    paper = summary["paper"]["table_ii"]
+    y = np.arange(len(methods))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 1.6 + 0.45 * len(methods)), dpi=150, sharey=True,
+                             layout="constrained")
+    for ax, key, label in ((axes[0], "e_cbf", "mean $E_{CBF}$ per episode, Eq. (20)"),
+                           (axes[1], "cbf_active_pct", "CBF active (% of control steps)")):
+        ours = np.array([np.nan if (v := summary["methods"][m][key]) is None else v for m in methods], float)
+        ref = np.array([np.nan if (v := paper.get(m, {}).get(key)) is None else v for m in methods], float)
+        ax.barh(y, np.nan_to_num(ours), color="tab:blue", alpha=0.8, label="ours")
+        ax.scatter(ref, y, marker="D", color="black", zorder=3, label="paper (Table II)")
+        for yi, v in zip(y, ours):
+            if not np.isnan(v):
+                ax.text(v, yi + 0.32, f" {v:.2f}", va="center", fontsize=7, color="tab:blue")
+        if key == "e_cbf":
+            ax.set_xscale("symlog", linthresh=0.01)
+        top = np.nanmax(np.concatenate([ours, ref, [1e-3]]))
+        ax.set_xlim(0, top * (3.0 if key == "e_cbf" else 1.2))
+        ax.set_xlabel(label, fontsize=9)
+        ax.grid(axis="x", alpha=0.3)
+    axes[0].set_yticks(y, [display(m) for m in methods], fontsize=9)
+    axes[0].invert_yaxis()
+    handles, labels = axes[1].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="outside lower center", ncol=2, frameon=False)
+    fig.suptitle("Burden on the common CBF filter (lower: the planner's commands need less correction)",
+                 fontsize=10)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+# --- everything at once --------------------------------------------------------------------------------------------
+
+def write_reports(out: Path, rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str],
+                  seeds: Sequence[int], info: dict | None = None) -> dict:
+    """Write episodes.csv, summary.json, summary.md and the two figures into ``out``; return the summary."""
+    out = Path(out)
+    summary = build_summary(rows, methods, scenarios, seeds, info)
+    write_csv(rows, out / "episodes.csv")
+    write_json(summary, out / "summary.json")
+    (out / "summary.md").write_text(summary_markdown(summary))
+    plot_heatmap(summary, out / "success_heatmap.png")
+    plot_burden(summary, out / "cbf_burden.png")
+    return summary
+
+
+def update_docs_page(page: Path, out: Path) -> None:
+    """Put a bench's results into a Markdown page, between the DOCS_BEGIN and DOCS_END marker lines, and copy the
+    figures to ``<page dir>/<page stem>/`` (e.g. docs/benchmark.md -> docs/benchmark/success_heatmap.png)."""
+    page, out = Path(page), Path(out)
+    try:
+        text = page.read_text()
+    except OSError as exc:
+        raise UserError(f"cannot read the page ({exc.strerror})", file=str(page)) from None
+    if text.count(DOCS_BEGIN) != 1 or text.count(DOCS_END) != 1 or text.index(DOCS_BEGIN) > text.index(DOCS_END):
+        raise UserError(f"the page needs one line '{DOCS_BEGIN}' and, after it, one line '{DOCS_END}'",
+                        file=str(page))
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise UserError(f"no readable summary.json ({exc})", file=str(out / "summary.json")) from None
+    img_dir = page.parent / page.stem
+    img_dir.mkdir(parents=True, exist_ok=True)
+    for name in FIGURES:
+        shutil.copyfile(out / name, img_dir / name)
+    body = summary_markdown(summary, level=3, image_dir=f"{page.stem}/")
+    head, rest = text.split(DOCS_BEGIN)
+    _, tail = rest.split(DOCS_END)
+    page.write_text(f"{head}{DOCS_BEGIN}\n{body}{DOCS_END}{tail}")
+
+
+def default_order(methods: Iterable[str], scenarios: Iterable[str]) -> tuple[list[str], list[str]]:
+    """Methods and scenarios in the paper's order (others after, in the given order)."""
+    return ordered(methods, METHOD_ORDER), ordered(scenarios, SCENARIO_ORDER)
+
+
+__all__ = ["summarize", "build_summary", "write_csv", "write_json", "summary_markdown", "plot_heatmap",
+           "plot_burden", "write_reports", "update_docs_page", "default_order", "TABLE2_KEYS"]

@@ -1,0 +1,211 @@
+"""A bench: plan the episodes, skip those already in the database, run the rest on an engine, write the reports.
+
+Episodes are submitted seed by seed (all scenarios and methods of seed 0 first, then seed 1, ...), so an
+interrupted bench holds complete paired sets for its first seeds.
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+from ..errors import UserError
+from . import engines, report
+from .store import ResultStore
+from .tasks import EpisodeTask, params_key, params_toml, run_episode, text_sha
+
+DB_NAME = "results.sqlite"
+OUTPUTS = ("results.sqlite", "episodes.csv", "summary.json", "summary.md") + report.FIGURES
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What to run and where. ``scenarios`` are names from scenarios/ or paths to .toml files."""
+    out: Path
+    methods: tuple[str, ...]
+    scenarios: tuple[str, ...]
+    seeds: tuple[int, ...]
+    workers: int | None = None            # local: default os.cpu_count(); ray: default all CPUs of the cluster
+    engine: str = "local"
+    ray_address: str | None = None
+    params: object = None                 # StackParams (default SIMULATION, Table I)
+    perception: str = "lidar"
+
+
+@dataclass
+class BenchOutcome:
+    total: int                            # episodes in the bench
+    already_done: int                     # found finished in the database
+    ran: int                              # run now (ok or error)
+    errors: int                           # error rows among the bench's episodes at the end
+    wall_time_s: float
+    summary: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def episodes_per_min(self) -> float:
+        return 60.0 * self.ran / self.wall_time_s if self.wall_time_s > 0 else 0.0
+
+
+def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
+    """The bench's tasks (seed-major), and its methods and scenario names in report order.
+
+    Checks everything a user can get wrong before any episode starts: unknown method or scenario, a scenario file
+    that does not load for one of the seeds, two files with the same scenario name, seeds, workers.
+    """
+    from ..control.methods import METHODS
+    from ..episode import PERCEPTION_MODES
+    from ..params.stack import SIMULATION
+    from ..scenario import load_scenario, resolve_path
+
+    if not config.methods:
+        raise UserError("no methods given")
+    if not config.scenarios:
+        raise UserError("no scenarios given")
+    if not config.seeds:
+        raise UserError("no seeds given")
+    for what, items in (("method", config.methods), ("scenario", config.scenarios), ("seed", config.seeds)):
+        dup = sorted({str(x) for x in items if list(items).count(x) > 1})
+        if dup:
+            raise UserError(f"{what} listed more than once: {', '.join(dup)}")
+    if any(int(s) < 0 for s in config.seeds):
+        raise UserError("seeds must be >= 0")
+    if config.workers is not None and config.workers < 1:
+        raise UserError(f"--workers must be >= 1, got {config.workers}")
+    if config.engine not in engines.ENGINES:
+        raise UserError(f"unknown engine {config.engine!r}; known: {', '.join(engines.ENGINES)}")
+    if config.perception not in PERCEPTION_MODES:
+        raise UserError(f"unknown perception {config.perception!r}; known: {', '.join(PERCEPTION_MODES)}")
+    for m in config.methods:
+        METHODS.get(m)
+    ptoml = params_toml(config.params if config.params is not None else SIMULATION)
+    phash = params_key(ptoml, config.perception)
+
+    scen: dict[str, tuple[str, str]] = {}          # name -> (sha, text)
+    for s in config.scenarios:
+        path = resolve_path(s)
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"cannot read the scenario file ({exc})", file=str(path)) from None
+        name = None
+        for seed in config.seeds:        # every seed's draw must be valid before we start
+            name = load_scenario(path, seed).name
+        if name in scen:
+            raise UserError(f"two scenarios are named {name!r}; a bench needs distinct names", file=str(path))
+        scen[name] = (text_sha(text), text)
+    methods, names = report.default_order(config.methods, scen)
+    tasks = [EpisodeTask(scenario=n, scenario_sha=scen[n][0], scenario_toml=scen[n][1], method=m, seed=int(seed),
+                         params_hash=phash, params_toml=ptoml, perception=config.perception)
+             for seed in config.seeds for n in names for m in methods]
+    return tasks, methods, names
+
+
+class _DirLock:
+    """An exclusive lock on the output directory (released by the OS if the process dies)."""
+
+    def __init__(self, out: Path):
+        self.path = out / ".bench.lock"
+        self.fh = self.path.open("w")
+        try:
+            fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.fh.close()
+            raise UserError("another 'bigcbf bench' is writing to this directory", file=str(out)) from None
+
+    def release(self) -> None:
+        fcntl.flock(self.fh, fcntl.LOCK_UN)
+        self.fh.close()
+
+
+def _prepare_out(out: Path) -> Path:
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UserError("--out must be a directory, found a file", file=str(out))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"cannot create the output directory ({exc.strerror})", file=str(out)) from None
+    return out
+
+
+def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only: bool = False,
+              episode_fn: Callable[[EpisodeTask], dict] = run_episode, log=None) -> BenchOutcome:
+    """Run (or resume) a bench and write every output into ``config.out``.
+
+    ``progress``: a tqdm bar (None: only on a terminal). ``report_only``: run nothing, rebuild the outputs from the
+    database. ``episode_fn``: what a worker runs per task (tests inject failures here). ``log``: where the final
+    line and error lines go (default: stderr).
+    """
+    from tqdm import tqdm
+
+    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    tasks, methods, scenarios = plan(config)
+    out = _prepare_out(config.out)
+    lock = _DirLock(out)
+    t0 = time.perf_counter()
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    phash = tasks[0].params_hash
+    try:
+        with ResultStore(out / DB_NAME) as store:
+            store.add_params(phash, config.perception, tasks[0].params_toml)
+            for t in {t.scenario_sha: t for t in tasks}.values():
+                store.add_scenario(t.scenario_sha, t.scenario, t.scenario_toml)
+            done = store.ok_keys()
+            todo = [] if report_only else [t for t in tasks if t.key not in done]
+            already = sum(t.key in done for t in tasks)
+            bar = tqdm(total=len(tasks), initial=already, unit="ep", desc="bench", dynamic_ncols=True,
+                       disable=(not sys.stderr.isatty()) if progress is None else not progress, smoothing=0.05)
+            ran = errors_now = 0
+
+            def on_row(row: dict) -> None:
+                nonlocal ran, errors_now
+                store.put(row)
+                ran += 1
+                bar.update(1)
+                if row["status"] == "error":
+                    errors_now += 1
+                    bar.write(f"bench: error in {row['scenario']} / {row['method']} / seed {row['seed']}: "
+                              f"{row['error'].splitlines()[0]}", file=sys.stderr)
+
+            completed = False
+            try:
+                if todo:
+                    engines.run(config.engine, todo, config.workers, on_row, episode_fn, config.ray_address)
+                completed = True
+            finally:
+                bar.close()
+                wall = time.perf_counter() - t0
+                if ran:
+                    store.add_run(started_utc=started, params_hash=phash, engine=config.engine,
+                                  workers=config.workers or "all", host=socket.gethostname(), episodes_run=ran,
+                                  errors=errors_now, wall_time_s=round(wall, 2), completed=completed)
+            rows = store.rows([t.key for t in tasks])
+            runs = store.runs(phash)
+        info = {"perception": config.perception, "params_hash": phash, "engine": config.engine,
+                "workers": config.workers or (os.cpu_count() if config.engine == "local" else "all")}
+        if runs:   # over every invocation that ran episodes of these parameters (a resumed bench has several)
+            n, w = sum(r["episodes_run"] for r in runs), sum(r["wall_time_s"] for r in runs)
+            info.update(runs=len(runs), wall_time_s=round(w, 1), episodes_per_min=round(60.0 * n / w, 2) if w else None)
+        summary = report.write_reports(out, rows, methods, scenarios, list(config.seeds), info)
+    finally:
+        lock.release()
+    outcome = BenchOutcome(total=len(tasks), already_done=already, ran=ran,
+                           errors=summary["bench"]["errors"], wall_time_s=wall, summary=summary)
+    missing = len(tasks) - len(rows)
+    versions = summary["bench"]["code_versions"]
+    if len(versions) > 1:
+        log(f"bench: warning: the rows come from {len(versions)} code versions ({', '.join(versions)}); "
+            "use a new --out for consistent numbers")
+    log(f"bench: {len(tasks)} episodes: {already} already done, {ran} run now"
+        f"{f' ({outcome.episodes_per_min:.1f} episodes/min)' if ran else ''}, {outcome.errors} errors"
+        f"{f', {missing} not run' if missing else ''}; {wall:.1f} s; wrote {out}")
+    return outcome
+
+
+__all__ = ["BenchConfig", "BenchOutcome", "plan", "run_bench", "OUTPUTS", "DB_NAME"]

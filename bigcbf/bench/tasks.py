@@ -1,0 +1,174 @@
+"""What a bench worker runs: one episode from plain, picklable arguments, returned as a result row.
+
+A task carries the scenario file's *text* and the parameters' TOML *text* (not paths or objects), so that it
+pickles for the process pool and for Ray, and a worker on another machine needs only the installed package.
+The worker never touches the database: it returns a row (a plain dict) and the parent writes it.
+
+Keys: an episode is identified by (scenario, method, seed, params_hash, scenario_sha). ``params_hash`` covers
+the StackParams and the perception mode, ``scenario_sha`` the scenario file's content, so changing either gives
+new rows instead of mixing results of different settings.
+
+This module imports nothing heavy at import time (the spawned workers import it first and set their threading
+environment before numpy is loaded).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import socket
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+#: Bump when the meaning of a row changes (part of params_hash, so old rows are not mixed with new ones).
+HASH_VERSION = "bigcbf-bench-1"
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to run, in plain data."""
+    scenario: str            # scenario name (the file's ``name``, or its stem)
+    scenario_sha: str        # sha256 of the scenario file's bytes
+    scenario_toml: str       # the scenario file's text
+    method: str
+    seed: int
+    params_hash: str         # params_key(params_toml, perception)
+    params_toml: str         # StackParams as TOML
+    perception: str = "lidar"
+
+    @property
+    def key(self) -> tuple[str, str, int, str, str]:
+        return (self.scenario, self.method, self.seed, self.params_hash, self.scenario_sha)
+
+
+def params_toml(params) -> str:
+    """The TOML text of a StackParams (every key; deterministic: dataclass field order)."""
+    import tomli_w
+
+    from ..params.toml_io import to_dict
+    return tomli_w.dumps(to_dict(params))
+
+
+def params_key(toml_text: str, perception: str) -> str:
+    """Stable hash of the parameters and the perception mode: sha256 over a versioned, canonical text (hex, 16)."""
+    h = hashlib.sha256()
+    h.update(f"{HASH_VERSION}\nperception = {perception!r}\n".encode())
+    h.update(toml_text.encode())
+    return h.hexdigest()[:16]
+
+
+def text_sha(text: str) -> str:
+    """sha256 of a text (hex, 16 digits)."""
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# --- the worker side -------------------------------------------------------------------------------------------
+
+_PARAMS_CACHE: dict[str, Any] = {}
+
+
+def _params(task: EpisodeTask):
+    p = _PARAMS_CACHE.get(task.params_hash)
+    if p is None:
+        import tomllib
+
+        from ..params.stack import StackParams
+        from ..params.toml_io import from_dict
+        p = from_dict(StackParams, tomllib.loads(task.params_toml), file=f"<params {task.params_hash}>")
+        _PARAMS_CACHE[task.params_hash] = p
+    return p
+
+
+def _scenario(task: EpisodeTask):
+    """The task's scenario drawn for its seed: load_scenario reads files, so the text goes through a temporary
+    file named after the scenario (deleted at once; nothing of the episode refers to it afterwards)."""
+    from ..scenario import load_scenario
+
+    with tempfile.TemporaryDirectory(prefix="bigcbf-bench-") as d:
+        path = Path(d) / f"{task.scenario}.toml"
+        path.write_text(task.scenario_toml)
+        return load_scenario(path, task.seed)
+
+
+def _json_safe(metrics: dict) -> dict:
+    """Metrics as JSON gives them back (tuples -> lists, numpy scalars -> Python numbers); inf/nan are kept (the
+    store writes them as JSON Infinity/NaN; summary.json turns them into null)."""
+    def default(o):
+        if hasattr(o, "item"):
+            return o.item()
+        if hasattr(o, "tolist"):
+            return o.tolist()
+        raise TypeError(f"not JSON-serializable: {type(o).__name__}")
+    text = json.dumps(metrics, default=default)
+    return json.loads(text)
+
+
+def run_episode(task: EpisodeTask) -> dict:
+    """Run one episode (Episode(...).run().metrics()) and return its metrics as a JSON-safe dict."""
+    from ..episode import Episode
+
+    result = Episode(_scenario(task), task.method, task.seed, _params(task), perception=task.perception).run()
+    return _json_safe(result.metrics())
+
+
+_CODE_SHA: str | None = None
+
+
+def code_sha() -> str:
+    """Fingerprint of the code that runs episodes: sha256 over the bigcbf package's .py files (hex, 12).
+
+    Not part of an episode's key (editing any file would make a resumed bench start over), but stored in every
+    row; the reports warn when a bench's rows come from more than one version."""
+    global _CODE_SHA
+    if _CODE_SHA is None:
+        root = Path(__file__).resolve().parent.parent
+        h = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+        _CODE_SHA = h.hexdigest()[:12]
+    return _CODE_SHA
+
+
+def guarded(fn: Callable[[EpisodeTask], dict], task: EpisodeTask) -> dict:
+    """Run ``fn(task)`` and return a result row; an exception becomes a row with status "error" and its message.
+
+    This is the function the engines send to workers (top-level, so it pickles).
+    """
+    t0 = time.perf_counter()
+    row = dict(scenario=task.scenario, method=task.method, seed=task.seed, params_hash=task.params_hash,
+               scenario_sha=task.scenario_sha, host=socket.gethostname(), pid=os.getpid(), code_sha=code_sha())
+    try:
+        metrics = fn(task)
+    except Exception as exc:  # noqa: BLE001 - any crash of an episode is recorded, not raised
+        frames = traceback.extract_tb(exc.__traceback__)
+        where = f" (at {Path(frames[-1].filename).name}:{frames[-1].lineno} in {frames[-1].name})" if frames else ""
+        row.update(status="error", error=f"{type(exc).__name__}: {exc}{where}", metrics=None)
+    else:
+        row.update(status="ok", error=None, metrics=metrics)
+    row["worker_wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def watch_parent(parent_pid: int, period_s: float = 1.0) -> None:
+    """Worker initializer: exit when the parent bench process is gone (killed with SIGKILL, say), instead of
+    lingering as an orphan that finishes episodes nobody will record."""
+    import threading
+
+    def watch():
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(1)
+            time.sleep(period_s)
+
+    threading.Thread(target=watch, name="bench-parent-watch", daemon=True).start()
+
+
+def error_row(task: EpisodeTask, message: str) -> dict:
+    """A row for an episode whose worker died (no exception could be caught inside it)."""
+    return dict(scenario=task.scenario, method=task.method, seed=task.seed, params_hash=task.params_hash,
+                scenario_sha=task.scenario_sha, host=socket.gethostname(), pid=None, code_sha=None, status="error",
+                error=message, metrics=None, worker_wall_s=None)

@@ -1,0 +1,97 @@
+"""bigcbf bench: the paper's benchmark (methods x scenarios x seeds), resumable, on local cores or Ray."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite, resumable; "
+        "write episodes.csv, summary.json/.md and figures")
+
+DEFAULT_SEEDS = 50
+
+
+def add_arguments(p):
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output directory (created; rerunning with the same DIR resumes)")
+    p.add_argument("--methods", nargs="+", default=None, metavar="M",
+                   help="methods to compare (default: every registered method)")
+    p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
+                   help="scenario names or .toml files (default: the nine of scenarios/)")
+    seeds = p.add_mutually_exclusive_group()
+    seeds.add_argument("--seeds", default=None, metavar="N",
+                       help=f"seeds 0..N-1, the same for every method (default {DEFAULT_SEEDS})")
+    seeds.add_argument("--seed-list", nargs="+", default=None, metavar="SEED", help="these seeds instead")
+    p.add_argument("--workers", default=None, metavar="K",
+                   help="parallel episodes (default: one per core; with --engine ray: the cluster's CPUs)")
+    p.add_argument("--engine", default="local", metavar="{local,ray}",
+                   help="local process pool (default) or Ray tasks (pip install 'bigcbf[ray]')")
+    p.add_argument("--ray-address", default=None, metavar="ADDR",
+                   help="an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray instance")
+    p.add_argument("--profile", type=Path, default=None,
+                   help="stack parameters / uncertainty profile TOML (default: Table I); part of the episode key")
+    p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
+                   help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
+    p.add_argument("--report-only", action="store_true",
+                   help="run nothing: rebuild the outputs from the episodes already in DIR/results.sqlite")
+    p.add_argument("--docs", type=Path, default=None, metavar="PAGE",
+                   help="also put the results into this Markdown page between its bench-results markers")
+    p.add_argument("--progress", choices=["auto", "on", "off"], default="auto",
+                   help="progress bar (default: only on a terminal)")
+
+
+def _int(value: str, option: str, minimum: int) -> int:
+    from ..errors import UserError
+    try:
+        v = int(value)
+    except (TypeError, ValueError):
+        raise UserError(f"{option} expects a whole number, got {value!r}") from None
+    if v < minimum:
+        raise UserError(f"{option} must be >= {minimum}, got {v}")
+    return v
+
+
+def config_from_args(args):
+    """A BenchConfig from parsed arguments; every mistake is a UserError (one line, exit 2)."""
+    from ..bench.engines import ENGINES, ray_available
+    from ..bench.paper import METHOD_ORDER, SCENARIO_ORDER, ordered
+    from ..bench.runner import BenchConfig
+    from ..control.methods import METHODS
+    from ..errors import UserError
+    from ..scenario import scenario_files
+    from .run import load_params
+
+    if args.engine not in ENGINES:
+        raise UserError(f"--engine must be one of {', '.join(ENGINES)}, got {args.engine!r}")
+    if args.ray_address is not None and args.engine != "ray":
+        raise UserError("--ray-address needs --engine ray")
+    if args.engine == "ray" and not ray_available():
+        raise UserError("--engine ray needs Ray, which is not installed: pip install 'bigcbf[ray]'")
+    if args.perception not in ("lidar", "truth"):
+        raise UserError(f"--perception must be lidar or truth, got {args.perception!r}")
+    if args.seed_list is not None:
+        seeds = tuple(_int(s, "--seed-list", 0) for s in args.seed_list)
+    else:
+        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(DEFAULT_SEEDS), "--seeds", 1)))
+    workers = None if args.workers is None else _int(args.workers, "--workers", 1)
+    if workers is None and args.engine == "local":
+        workers = os.cpu_count() or 1
+    methods = tuple(args.methods) if args.methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
+    for m in methods:
+        METHODS.get(m)
+    scenarios = tuple(args.scenarios) if args.scenarios else tuple(ordered(scenario_files(), SCENARIO_ORDER))
+    return BenchConfig(out=args.out, methods=methods, scenarios=scenarios, seeds=seeds, workers=workers,
+                       engine=args.engine, ray_address=args.ray_address, params=load_params(args.profile),
+                       perception=args.perception)
+
+
+def run(args) -> int:
+    from ..bench.report import update_docs_page
+    from ..bench.runner import run_bench
+
+    config = config_from_args(args)
+    progress = {"auto": None, "on": True, "off": False}[args.progress]
+    outcome = run_bench(config, progress=progress, report_only=args.report_only)
+    if args.docs is not None:
+        update_docs_page(args.docs, config.out)
+        print(f"bench: updated {args.docs}")
+    return 1 if outcome.errors else 0

@@ -1,0 +1,163 @@
+"""Aggregation and report files, from synthetic rows (no physics)."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import pytest
+
+from bigcbf.bench import paper, report
+from bigcbf.errors import UserError
+
+
+def metrics(**kw) -> dict:
+    base = dict(success=False, collision=False, timeout=True, time_s=40.0, min_clearance_m=0.5, e_cbf=0.0,
+                cbf_active_ratio=0.0, qp_infeasible_ratio=0.0, planner_p95_ms=0.0, cbf_p95_ms=0.0,
+                perception_p95_ms=0.0, stopped_time_s=0.0, final_goal_dist_m=1.0, sim_time_s=40.0, wall_time_s=1.0,
+                control_steps=800, mode_history=[[0.0, "GOAL"]], perception="lidar", warnings={})
+    base.update(kw)
+    return base
+
+
+def row(scenario, method, seed, status="ok", error=None, **kw) -> dict:
+    return dict(scenario=scenario, method=method, seed=seed, params_hash="p", scenario_sha="s", status=status,
+                error=error, metrics=metrics(**kw) if status == "ok" else None, worker_wall_s=1.0, host="h",
+                attempts=1)
+
+
+def three_rows():
+    """Two finished episodes and a crashed one."""
+    return [
+        row("a", "big-cbf", 0, success=True, timeout=False, time_s=10.0, min_clearance_m=0.5, e_cbf=2.0,
+            cbf_active_ratio=0.25, qp_infeasible_ratio=0.01, control_steps=100, planner_p95_ms=50.0),
+        row("b", "big-cbf", 0, success=False, timeout=True, time_s=40.0, min_clearance_m=0.3, e_cbf=4.0,
+            cbf_active_ratio=0.5, qp_infeasible_ratio=0.0, control_steps=200, planner_p95_ms=70.0),
+        row("a", "big-cbf", 1, status="error", error="RuntimeError: boom"),
+    ]
+
+
+def test_summarize_hand_computed():
+    s = report.summarize(three_rows())
+    # by hand: 2 finished of 3; 1 of 2 succeeded; time over successes only = 10 s; clearance (0.5+0.3)/2;
+    # E_CBF (2+4)/2; active steps 0.25*100 + 0.5*200 = 125 of 300; infeasible 0.01*100 = 1 of 300;
+    # planner P95 (50+70)/2
+    assert (s["episodes"], s["ok"], s["errors"]) == (3, 2, 1)
+    assert s["success_pct"] == pytest.approx(50.0)
+    assert s["time_s"] == pytest.approx(10.0)
+    assert s["min_clearance_m"] == pytest.approx(0.4)
+    assert s["e_cbf"] == pytest.approx(3.0)
+    assert s["cbf_active_pct"] == pytest.approx(100 * 125 / 300)
+    assert s["qp_infeasible_pct"] == pytest.approx(100 * 1 / 300)
+    assert s["planner_p95_ms"] == pytest.approx(60.0)
+    assert (s["collisions"], s["timeouts"]) == (0, 1)
+
+
+def test_summarize_empty_and_infinite_clearance():
+    s = report.summarize([row("a", "m", 0, status="error", error="x")])
+    assert s["success_pct"] is None and s["time_s"] is None and s["cbf_active_pct"] is None
+    s = report.summarize([row("a", "m", 0, min_clearance_m=math.inf), row("a", "m", 1, min_clearance_m=0.2)])
+    assert s["min_clearance_m"] == pytest.approx(0.2)   # an episode without obstacles has no finite clearance
+
+
+def test_build_summary_keys_by_method_and_scenario():
+    rows = three_rows() + [row("a", "cbf-only", 0, success=True, timeout=False, time_s=20.0)]
+    s = report.build_summary(rows, ["cbf-only", "big-cbf"], ["a", "b"], [0, 1])
+    assert s["methods"]["cbf-only"]["success_pct"] == 100.0
+    assert s["by_scenario"]["big-cbf"]["a"]["success_pct"] == 100.0     # seed 1 crashed: 1 of 1 finished
+    assert s["by_scenario"]["big-cbf"]["b"]["success_pct"] == 0.0
+    assert s["by_scenario"]["cbf-only"]["b"]["ok"] == 0
+    assert s["bench"]["episodes_expected"] == 8 and s["bench"]["errors"] == 1
+    assert s["error_episodes"] == [{"scenario": "a", "method": "big-cbf", "seed": 1, "error": "RuntimeError: boom"}]
+    assert s["paper"]["table_ii"]["big-cbf"]["success_pct"] == 99.78
+
+
+def test_write_reports(tmp_path):
+    rows = three_rows() + [row("a", "cbf-only", 0, success=True, timeout=False, time_s=20.0,
+                               min_clearance_m=math.inf, mode_history=[[0.0, "GOAL"], [1.5, "SIDE-L"]])]
+    s = report.write_reports(tmp_path, rows, ["cbf-only", "big-cbf"], ["a", "b"], [0, 1], {"engine": "local"})
+    for name in ("episodes.csv", "summary.json", "summary.md") + report.FIGURES:
+        assert (tmp_path / name).stat().st_size > 0, name
+    # CSV: one line per row, every metric, lists as JSON
+    with (tmp_path / "episodes.csv").open() as fh:
+        lines = list(csv.DictReader(fh))
+    assert len(lines) == 4
+    assert set(metrics()) - {"scenario", "method", "seed"} <= set(lines[0])
+    assert json.loads(lines[3]["mode_history"]) == [[0.0, "GOAL"], [1.5, "SIDE-L"]]
+    assert lines[2]["status"] == "error" and lines[2]["error"] == "RuntimeError: boom"
+    # JSON: strict (no Infinity), same numbers as returned
+    text = (tmp_path / "summary.json").read_text()
+    assert "Infinity" not in text and "NaN" not in text
+    js = json.loads(text)
+    assert js["methods"]["big-cbf"]["cbf_active_pct"] == pytest.approx(s["methods"]["big-cbf"]["cbf_active_pct"])
+    assert js["methods"]["cbf-only"]["min_clearance_m"] is None
+    # Markdown: Table II columns, per-scenario table, the paper's numbers, the crashed episode
+    md = (tmp_path / "summary.md").read_text()
+    for col in ("Success (%)", "Time (s)", "Clearance (m)", "E_CBF", "Active (%)", "QP infeas. (%)", "Collisions",
+                "Planner P95 (ms)"):
+        assert col in md
+    assert "| BIG-CBF | 2 | 50.00 | 10.00 | 0.40 | 3.00 | 41.67 | 0.33 | 0 | 60.00 |" in md
+    assert "50.00 / 99.78" in md and "100.00 / 68.67" in md          # ours / paper's success
+    assert "## Success per scenario (%)" in md
+    assert "a / big-cbf / seed 1: RuntimeError: boom" in md
+    for fig in report.FIGURES:
+        img = mpimg.imread(tmp_path / fig)
+        assert img.shape[0] > 200 and img.shape[1] > 400
+
+
+def test_update_docs_page(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    report.write_reports(out, three_rows(), ["big-cbf"], ["a", "b"], [0, 1])
+    page = tmp_path / "docs" / "benchmark.md"
+    page.parent.mkdir()
+    page.write_text(f"# Title\n\nintro\n\n{report.DOCS_BEGIN}\nold\n{report.DOCS_END}\n\nafter\n")
+    report.update_docs_page(page, out)
+    text = page.read_text()
+    assert text.startswith("# Title\n\nintro\n") and text.endswith(f"{report.DOCS_END}\n\nafter\n")
+    assert "old" not in text and "\n### Benchmark results\n" in text
+    assert "![success rate per method and scenario](benchmark/success_heatmap.png)" in text
+    assert (page.parent / "benchmark" / "success_heatmap.png").is_file()
+    page.write_text("no markers\n")
+    with pytest.raises(UserError, match="benchmark.md"):
+        report.update_docs_page(page, out)
+
+
+def test_paper_numbers_match_the_paper_source():
+    """Our copy of Table II equals the table in the paper's LaTeX (parsed independently here)."""
+    tex = Path("/work/shared/paper/big-cbf.tex")
+    if not tex.is_file():
+        pytest.skip("paper source not available")
+    body = tex.read_text().split(r"\label{tab:overall_sim}")[1].split(r"\bottomrule")[0]
+    names = {v: k for k, v in paper.DISPLAY_NAME.items()}
+    found = {}
+    for line in body.splitlines():
+        m = re.match(r"\s*(.+?)\s*&(.+)\\\\", line)
+        if not m or "Method" in line or "(\\%)" in line:
+            continue
+        name = re.sub(r"\\textbf\{(.+?)\}", r"\1", m.group(1)).strip()
+        vals = [float(re.sub(r"\\textbf\{(.+?)\}", r"\1", v).strip()) for v in m.group(2).split("&")]
+        found[names[name]] = vals
+    assert set(found) == set(paper.METHOD_ORDER)
+    for m, vals in found.items():
+        assert [paper.PAPER_TABLE_II[m][k] for k in paper.TABLE2_KEYS] == vals
+
+
+def test_order():
+    assert paper.ordered(["big-cbf", "x", "cbf-only"], paper.METHOD_ORDER) == ["cbf-only", "big-cbf", "x"]
+    m, s = report.default_order(["big-cbf", "dwa"], ["required_sidestepping", "blind_corner", "mine"])
+    assert m == ["dwa", "big-cbf"] and s == ["blind_corner", "required_sidestepping", "mine"]
+
+
+def test_rows_of_several_code_versions_are_flagged(tmp_path):
+    rows = three_rows()
+    rows[0]["code_sha"], rows[1]["code_sha"] = "aaa", "bbb"
+    s = report.write_reports(tmp_path, rows, ["big-cbf"], ["a", "b"], [0, 1])
+    assert s["bench"]["code_versions"] == ["aaa", "bbb"]
+    assert "2 different versions of the code (aaa, bbb" in (tmp_path / "summary.md").read_text()
+    rows[1]["code_sha"] = "aaa"
+    report.write_reports(tmp_path, rows, ["big-cbf"], ["a", "b"], [0, 1])
+    assert "Warning" not in (tmp_path / "summary.md").read_text()
