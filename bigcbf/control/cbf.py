@@ -21,13 +21,19 @@ QP objects are cached per row count and warm-started from their previous result 
 WARM_START_WITH_PREVIOUS_RESULT), so a changing number of constraints between calls is handled by switching
 objects, never by padding.
 
-Infeasibility (or a solver failure): a linear program (scipy HiGHS) finds the least worst-case violation
-t* = min_u max_i (b_i - a_i^T u)^+ over the box; if t* > ``FEAS_TOL`` the QP is infeasible and the filter
-returns the minimum-intervention command among those attaining t* (rows relaxed by t*, fallback
-"least-violation"). If the LP shows the problem feasible after all (a solver failure), the same relaxed QP
-gives the solution (fallback "qp-retry", not infeasible). If the LP itself fails, the filter brakes (u = 0,
-inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input"). The output is
-always finite and inside the box.
+Infeasibility (or a solver failure): the same QP with one slack t >= 0 shared by every row and an exact penalty,
+
+    min_(u, t) (u - u_in)^T H (u - u_in) + SLACK_PENALTY t   s.t.  C_i u + t >= l_i,  u_min <= u <= u_max,
+
+finds the least worst-case violation t* = min_u max_i (l_i - C_i u)^+ over the box and, among the commands
+attaining it, the minimum-intervention one (the penalty exceeds any multiplier of the normalized rows, so t is
+minimized first). This problem is always feasible and well conditioned; a least-violation LP followed by a QP
+on the rows relaxed by t* is not: its feasible set shrinks to a point or a segment and the QP solver failed on
+such problems, leaving the LP's vertex, with an arbitrary yaw rate, as the command. If t* > ``FEAS_TOL`` the QP
+was infeasible (fallback "least-violation"); otherwise the solver had failed on a feasible problem and the slack
+QP's solution is the answer (fallback "qp-retry", not infeasible). If the slack QP fails too, the filter brakes
+(u = 0, inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input"). The
+output is always finite and inside the box.
 """
 from __future__ import annotations
 
@@ -39,7 +45,6 @@ from functools import lru_cache
 
 import numpy as np
 import proxsuite
-from scipy.optimize import linprog
 
 from ..params.stack import ExecutionModel, StackParams
 from ..types import Obstacles, RobotState
@@ -49,6 +54,10 @@ _QP_EPS = 1e-9
 _QP_MAX_ITER = 100       # outer iterations (warm-started solves here take ~5-15)
 _QP_MAX_ITER_IN = 30     # inner iterations per outer one (the default 1500 let infeasible problems run ~1 s)
 _INF = 1e20
+#: exact-penalty weight of the slack in the least-violation QP (module docstring): the rows are normalized, so
+#: their multipliers stay below 2 max(H) (|u_max - u_min| + ...) ~ 10; 1e4 leaves a wide margin
+SLACK_PENALTY = 1e4
+_T_MAX = _INF         # no upper bound on the slack (a row of a near-degenerate obstacle can need a huge one)
 _SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
 
 
@@ -193,13 +202,17 @@ class CbfFilter:
         self._centre = 0.5 * (self.lo + self.hi)
         self._half = 0.5 * (self.hi - self.lo)
         self._qps: dict[int, tuple] = {}
+        self._slack_qps: dict[int, tuple] = {}
+        self._H_slack = np.diag(np.r_[2.0 * self.Hd, 0.0])
+        self._lo_slack, self._hi_slack = np.r_[self.lo, 0.0], np.r_[self.hi, _T_MAX]
 
     def reset(self) -> None:
         """Forget the warm starts (a new episode)."""
         self._qps.clear()
+        self._slack_qps.clear()
 
-    def _new_qp(self, n: int):
-        qp = proxsuite.proxqp.dense.QP(3, 0, n, True)
+    def _new_qp(self, n: int, nvar: int = 3):
+        qp = proxsuite.proxqp.dense.QP(nvar, 0, n, True)
         st = qp.settings
         st.eps_abs = _QP_EPS
         st.eps_rel = 0.0
@@ -237,15 +250,31 @@ class CbfFilter:
         x = np.array(res.x)
         return x if np.isfinite(x).all() else None
 
-    def _least_violation(self, C, lvec) -> tuple[float, np.ndarray] | None:
-        """min t s.t. C u + t >= l, box, t >= 0 (scipy HiGHS LP). Returns (t*, u) or None."""
+    def _least_violation(self, C, lvec, u_in) -> tuple[float, np.ndarray] | None:
+        """The slack QP of the module docstring (proxsuite, warm-started per row count). Returns (t*, u) or
+        None when the solver fails."""
         n = len(lvec)
-        A_ub = np.hstack([-C, -np.ones((n, 1))])
-        bounds = [(lo, hi) for lo, hi in zip(self.lo, self.hi)] + [(0.0, None)]
-        res = linprog(np.array([0.0, 0.0, 0.0, 1.0]), A_ub=A_ub, b_ub=-lvec, bounds=bounds, method="highs")
-        if res.status != 0 or not np.all(np.isfinite(res.x)):
+        Ca = np.hstack([C, np.ones((n, 1))])
+        g = np.r_[self._minus2Hd * u_in, SLACK_PENALTY]
+        entry = self._slack_qps.get(n)
+        if entry is None:
+            qp = self._new_qp(n, 4)
+            qp.init(self._H_slack, g, None, None, Ca, lvec, np.full(n, _INF), self._lo_slack, self._hi_slack)
+            self._slack_qps[n] = (qp,)
+        else:
+            qp = entry[0]
+            qp.update(g=g, C=Ca, l=lvec)
+        qp.solve()
+        res = qp.results
+        x = np.array(res.x)
+        if res.info.status != _SOLVED:
+            self._slack_qps.pop(n, None)      # do not warm-start from an unfinished solve
+        # this problem is always feasible: an unfinished solve (the iteration limit, e.g. with a row of a robot
+        # sitting on an obstacle's centre, l_i ~ 1e6) still gives a usable command; its violation is measured
+        if not np.isfinite(x).all():
             return None
-        return float(res.x[3]), np.minimum(np.maximum(res.x[:3], self.lo), self.hi)
+        u = np.minimum(np.maximum(x[:3], self.lo), self.hi)
+        return max(float((lvec - C @ u).max()), 0.0), u
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
         """Eqs. (18)-(19): the minimum-intervention safe command u_safe (3,) and what the filter did."""
@@ -294,19 +323,12 @@ class CbfFilter:
         return u, info
 
     def _infeasible(self, C, lvec, u_in, fallback):
-        """The QP failed: least worst-case violation (LP), then minimum intervention among its minimizers.
+        """The QP failed: the slack QP (least worst-case violation, then minimum intervention).
         Returns (u, fallback, infeasible); infeasible only when the least violation exceeds FEAS_TOL, otherwise
         (the solver failed on a feasible problem) the fallback is reported as "qp-retry"."""
-        lv = self._least_violation(C, lvec)
+        lv = self._least_violation(C, lvec, u_in)
         if lv is None:
             return np.zeros(3), "brake", True
-        t_star, u_lp = lv
+        t_star, u = lv
         infeasible = t_star > FEAS_TOL
-        fallback = "least-violation" if infeasible else (fallback or "qp-retry")
-        relaxed = lvec - t_star - 1e-9
-        x = self._solve_qp(C, relaxed, u_in, cache=False)
-        if x is not None:
-            x = np.minimum(np.maximum(x, self.lo), self.hi)
-            if float((relaxed - C @ x).max()) > 1e-6:
-                x = None
-        return (u_lp if x is None else x), fallback, infeasible
+        return u, ("least-violation" if infeasible else (fallback or "qp-retry")), infeasible

@@ -172,11 +172,17 @@ def test_changing_number_of_constraints_between_calls():
 def test_infeasible_least_violation():
     """Two pedestrians rush at the robot from both sides at 1.5 m/s: no command in the box satisfies both rows."""
     obs = Obstacles.from_lists([[0.6, 0.0], [-0.6, 0.0]], v=[[-1.5, 0.0], [1.5, 0.0]], r=0.25, static=False)
-    u, info = CbfFilter(P).filter(RobotState(0, 0, 0), obs, np.array([0.0, 0.2, 0.0]))
+    u, info = CbfFilter(P).filter(RobotState(0, 0, 0), obs, np.array([0.0, 0.2, 0.3]))
     assert info.infeasible and info.fallback == "least-violation" and info.active and info.max_violation > 0
     assert np.all(np.isfinite(u)) and np.all(u >= LO) and np.all(u <= HI)
-    # symmetric rows (u_in has no x part): the least worst violation stays between them, and u_y is kept
-    np.testing.assert_allclose(u, [0.0, 0.2, 0.0], atol=1e-6)
+    # symmetric rows (u_in has no x part): the least worst violation stays between them, and u_y is kept; so is
+    # the yaw rate, which no row constrains (a least-violation LP's vertex had put it at a bound)
+    np.testing.assert_allclose(u, [0.0, 0.2, 0.3], atol=1e-6)
+    # the worst violation is the least possible: x = 0 balances the two rows (by hand: any x moves one up)
+    rows = cbf_rows(RobotState(0, 0, 0), obs, np.array([0.0, 0.2, 0.3]), P)
+    assert info.max_violation == pytest.approx(float(np.max(rows.l - rows.C @ u)), abs=1e-9)
+    for dx in (-0.05, 0.05):
+        assert np.max(rows.l - rows.C @ (u + [dx, 0, 0])) > info.max_violation
 
 
 def test_degenerate_and_invalid_input_never_nan():
