@@ -28,13 +28,17 @@ Choices the paper leaves open (documented here, parameters in StackParams):
 * YIELD (zero command) is a candidate only while a dynamic obstacle is tracked ("YIELD intentionally suppresses
   movement when dynamic obstacles are present"); in a static scene standing still would never resolve anything.
 * Inside the goal region (Eq. 5 of Sec. II, ||p - p_g|| <= eps_g) every policy commands zero.
-* REVERSE (reverse-release fallback): move at ``v_release_mps`` away from the obstacles closer than
-  r_R + r_i + d0 + ``release_range_m``, weighted by how deep they are inside that range; if none is that close
-  (or their pushes cancel), straight back away from the goal. "Away" from a moving obstacle (speed above
-  ``RELEASE_MOVING_MPS``) means out of its path, perpendicular to its velocity (to the side the robot is already
-  on; to the obstacle's right when exactly on its path): backing away along a pedestrian's walking direction
-  would keep the robot in front of it (seen in the blind corner: the robot fled down a corridor ahead of the
-  person).
+* REVERSE (reverse-release fallback): a constant world-frame release velocity ``release_v`` chosen by the
+  imagination when the fallback is invoked (:func:`bigcbf.control.imagination.choose_release`) from a predefined
+  fan of candidates: the *push* (below), straight back from the goal, seven more headings 45 degrees apart
+  around it, all at ``v_release_mps``, and standing still. Without a chosen velocity (e.g. a direct call), the
+  push: move at ``v_release_mps`` away from the obstacles closer than r_R + r_i + d0 + ``release_range_m``,
+  weighted by how deep they are inside that range; if none is that close (or their pushes cancel), straight
+  back away from the goal. "Away" from a moving obstacle (speed above ``RELEASE_MOVING_MPS``) means out of its
+  path, perpendicular to its velocity (to the side the robot is already on; to the obstacle's right when
+  exactly on its path). The push alone is myopic: in the blind corner it backed the robot off a wall corner
+  into the path of the person it was releasing from, and the hard CBF then chased it down a side corridor
+  ahead of the person for 8 s.
 """
 from __future__ import annotations
 
@@ -208,16 +212,19 @@ def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> 
     return params.v_release_mps * direction
 
 
-def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None) -> np.ndarray:
+def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None,
+                    release_v=None) -> np.ndarray:
     """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (Eqs. 6-8), zero inside the
-    goal region; REVERSE rows use the fallback."""
+    goal region; REVERSE rows use the fallback: ``release_v`` (2,) when given, else the push."""
     mode_idx = np.asarray(mode_idx, int)
     p = np.atleast_2d(np.asarray(p, float))
     v = feedback_velocity(subgoal_error(mode_idx, p, goal, obs_p, obs_r, params, groups),
                           speed_limits(params)[mode_idx])
     is_rev = mode_idx == MODE_INDEX[REVERSE]
     if np.any(is_rev):
-        v = np.where(is_rev[:, None], release_velocity(p, goal, obs_p, obs_r, params, obs_v), v)
+        rv = (release_velocity(p, goal, obs_p, obs_r, params, obs_v) if release_v is None
+              else np.broadcast_to(np.asarray(release_v, float).reshape(2), p.shape))
+        v = np.where(is_rev[:, None], rv, v)
     dist = np.hypot(*(np.asarray(goal, float) - p).T)
     return np.where((dist > params.eps_g_m)[:, None], v, 0.0)
 
@@ -230,11 +237,12 @@ def body_command(theta, v_world) -> np.ndarray:
 
 
 def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams,
-                     groups=None) -> np.ndarray:
+                     groups=None, release_v=None) -> np.ndarray:
     """Eq. (5): u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest estimates (3,).
-    ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given."""
+    ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given;
+    ``release_v``: the REVERSE fallback's chosen world velocity (2,) (the push when None)."""
     if mode not in MODE_INDEX:
         raise ValueError(f"unknown behavior mode {mode!r}; known: {', '.join(MODES)}")
     v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params, groups,
-                        obstacles.v)
+                        obstacles.v, release_v)
     return body_command(np.array([state.theta]), v)[0]

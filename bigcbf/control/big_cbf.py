@@ -1,5 +1,9 @@
 """The BIG-CBF planner (and its NoShared ablation): behavior selection every T_B, the selected feedback policy
-regenerated at every control tick (Eq. 5). Its u_in goes to the common CbfFilter."""
+regenerated at every control tick (Eq. 5). Its u_in goes to the common CbfFilter.
+
+What a selection keeps: the mode, and when the mode is the REVERSE fallback, the release velocity the
+imagination chose for it (:func:`~bigcbf.control.imagination.choose_release`); no imagined trajectory or command
+is replayed."""
 from __future__ import annotations
 
 import time
@@ -9,7 +13,7 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
-from .imagination import Imagination, imagine, rollout_paths
+from .imagination import Imagination, choose_release, imagine
 from .planner import PlanInfo
 from .selection import BehaviorSelector, Selection
 
@@ -35,6 +39,7 @@ class BigCbfPlanner:
         self.selector.reset()
         self._next_t: float | None = None
         self._path: np.ndarray | None = None
+        self._release_v: np.ndarray | None = None
         self.last_imagination: Imagination | None = None
         self.last_selection: Selection | None = None
 
@@ -47,9 +52,11 @@ class BigCbfPlanner:
         p = self.params
         img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode)
         sel = self.selector.select(t, img)
-        if sel.mode == REVERSE:     # the fallback is no candidate: roll it out only when it is used
-            self._path = rollout_paths(state, obstacles, goal, p, (REVERSE,))[0]
+        if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
+            self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared)
+            self._path = rel.p[best]
         else:
+            self._release_v = None
             self._path = img.p[img.index(sel.mode)]
         self.last_imagination, self.last_selection = img, sel
         return sel
@@ -65,5 +72,5 @@ class BigCbfPlanner:
                 nxt += self.params.T_B_s
             self._next_t = nxt
         mode = self.selector.mode
-        u = behavior_command(mode, state, obstacles, goal, self.params)     # Eq. (5)
+        u = behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v)     # Eq. (5)
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path)

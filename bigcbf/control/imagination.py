@@ -19,6 +19,7 @@ arrays, no per-behavior Python); tests check it against a per-behavior reference
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,9 +27,8 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
-                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, mode_indices, obstacle_groups,
-                        release_directions,
-                        speed_limits)
+                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, goal_basis, mode_indices,
+                        obstacle_groups, release_directions, release_velocity, speed_limits)
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
 
@@ -52,6 +52,7 @@ class Imagination:
     J: np.ndarray          # (B,) cost of Eq. (10)
     available: np.ndarray  # (B,) bool: a candidate (YIELD needs a dynamic obstacle; REVERSE never is one)
     accepted: np.ndarray   # (B,) bool: available and passes the barrier test of Eq. (16)
+    deficit: np.ndarray | None = None    # (B,) sum over k = 1..N of max(0, -min_i h^img) [m^2] (the fallback's choice)
 
     def index(self, mode: str) -> int:
         return self.modes.index(mode)
@@ -119,10 +120,12 @@ class _Rollout:
     cov: np.ndarray | None      # (N+1, M, 2, 2) predicted covariances
 
 
-def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...]) -> _Rollout:
+def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
+             release_v: np.ndarray | None = None) -> _Rollout:
     """Eq. (9): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot propagated with
     the nominal Eq. (1), obstacles with Eqs. 2-3). Planar vectors are complex numbers (x + i y; R(theta) is
-    multiplication by e^{i theta}); all behaviors advance together, one numpy op per term and step."""
+    multiplication by e^{i theta}); all behaviors advance together, one numpy op per term and step.
+    ``release_v`` (B,) complex: the constant world velocity of each REVERSE row (default: the push)."""
     unc = params.uncertainty
     N, dt = params.N, params.dt_s
     K = _constants(modes, params)
@@ -191,7 +194,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
         v = e * np.minimum(gain, vmax * (dist > eps_g) / np.maximum(np.abs(e), _TINY))
-        if any_rev:                                                   # reverse-release fallback rows
+        if any_rev and release_v is not None:                        # chosen release velocities
+            v = np.where(is_rev, release_v * (dist > eps_g), v)
+        elif any_rev:                                                 # reverse-release fallback rows: the push
             push = 0j
             if M:
                 qz = p[:, None] - Oc[k]
@@ -222,17 +227,47 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
 
 def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                   modes: tuple[str, ...]) -> np.ndarray:
-    """The imagined positions (B, N+1, 2) of ``modes`` (Eq. 9), without scoring (e.g. the fallback's path)."""
+    """The imagined positions (B, N+1, 2) of ``modes`` (Eq. 9), without scoring."""
     ro = _rollout(state, obstacles, np.asarray(goal, float), params, tuple(modes))
     return np.stack([ro.P.real, ro.P.imag], -1)
 
 
+#: headings of the release fan, relative to straight back from the goal [rad]
+RELEASE_HEADINGS = np.deg2rad([0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0])
+
+
+def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: StackParams) -> np.ndarray:
+    """The fallback's predefined fan (B,) of world velocities as complex numbers: the push
+    (:func:`behaviors.release_velocity`), the eight ``RELEASE_HEADINGS`` around straight back from the goal at
+    ``v_release_mps``, and 0 (standing still)."""
+    push = release_velocity(state.p[None], goal, obstacles.p, obstacles.r, params, obstacles.v)[0]
+    d_g, _, _ = goal_basis(state.p, goal)
+    back = -complex(d_g[0], d_g[1]) if np.any(d_g) else complex(-math.cos(state.theta), -math.sin(state.theta))
+    fan = params.v_release_mps * back * np.exp(1j * RELEASE_HEADINGS)
+    return np.concatenate([[complex(push[0], push[1])], fan, [0j]])
+
+
+def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
+                   shared: bool = True) -> tuple[np.ndarray, Imagination, int]:
+    """The reverse-release fallback's velocity (2,) [m/s, odom]: of :func:`release_candidates`, the one whose
+    imagined rollout (Eq. 9, with the same prediction and shared barrier as the behaviors, Eqs. 14-16) has the least
+    accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img): it leaves the inflated radii soonest and
+    enters none on the way; ties (e.g. every candidate stays outside) go to the first in the fan's order, the push.
+    (The worst case min_k h would favour standing still: moving grows D through tau95 |v - v_i| and e_exec(u)
+    before the robot has moved away.) Also returns the candidates' imagination; the chosen row is ``index``."""
+    cand = release_candidates(state, obstacles, goal, params)
+    img = imagine(state, obstacles, goal, params, modes=(REVERSE,) * len(cand), shared=shared, release_v=cand)
+    best = int(np.argmin(img.deficit))
+    return np.array([cand[best].real, cand[best].imag]), img, best
+
+
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
-            modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None) -> Imagination:
+            modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
+            release_v: np.ndarray | None = None) -> Imagination:
     """Eq. (9) rollouts of ``modes`` from ``state`` and their scores (Eqs. 10, 16, 17).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
-    ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0).
+    ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0). ``release_v``: see :func:`_rollout`.
 
     The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
     shot over (behaviors, steps, obstacles).
@@ -241,7 +276,8 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     N = params.N
     goal = np.asarray(goal, float)
     pg = complex(goal[0], goal[1])
-    ro = _rollout(state, obstacles, goal, params, tuple(modes))
+    ro = _rollout(state, obstacles, goal, params, tuple(modes),
+                  None if release_v is None else np.asarray(release_v, complex))
     K, Pc, Vc, Uc, TH, Oc, cov = ro.K, ro.P, ro.V, ro.U, ro.TH, ro.Oc, ro.cov
     B, M = K.B, len(obstacles)
     A, unit_gradient = K.A, K.unit_gradient
@@ -255,6 +291,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     # ---- shared barrier (Eqs. 14-16) and analytic compatibility W~ (Eq. 17), all (b, k, i) at once
     W = np.zeros(B)
     h_min = np.full(B, np.inf)
+    deficit = np.zeros(B)
     if M:
         q = Pc[:, :, None] - Oc[None]                                  # q_i = p - p_i (B, N+1, M)
         q2 = q.real ** 2 + q.imag ** 2
@@ -269,6 +306,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
             D = base + params.noshared_margin_m
         h = q2 - D * D
         h_min = h.reshape(B, -1).min(axis=1)
+        deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
         qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
         gamma = 2.0 * (qn.real * rn.real + qn.imag * rn.imag) + params.alpha_per_s * hn
         # |grad_u gamma|^2 = 4 ||A_xy^T R^T q||^2 (A_xy = translational rows of A, all three u channels)
@@ -293,4 +331,4 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted)
+    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit)

@@ -2,6 +2,7 @@
 import math
 
 import numpy as np
+import pytest
 
 from bigcbf.control import METHODS, BigCbfPlanner, CbfFilter, behavior_command
 from bigcbf.control.imagination import Imagination
@@ -94,6 +95,38 @@ def test_robot_inside_margin_rejects_everything():
     obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
     u, info = BigCbfPlanner(P).plan(0.0, RobotState(0, 0, 0), obs, GOAL)
     assert info.mode == "REVERSE" and u[0] < 0
+
+
+def test_release_leaves_an_approaching_pedestrian_path_not_just_a_wall():
+    """The blind-corner trap: a wall corner behind-right of the robot and a pedestrian coming down across the
+    robot's front. The push backs off the wall corner (up and forward, into the person's path); the release the
+    imagination chooses has the least accumulated barrier deficit, and it moves away from the path (x < 0)."""
+    from bigcbf.control.imagination import choose_release, release_candidates
+    state = RobotState(0.0, 0.0, 0.0)
+    wall = np.c_[np.linspace(-0.6, 0.0, 7), np.full(7, -0.45)]
+    obs = Obstacles.from_lists(np.r_[wall, [[0.7, 0.9]]], v=np.r_[np.zeros((7, 2)), [[0.0, -1.0]]],
+                               r=np.r_[np.zeros(7), 0.25], cov=np.eye(2) * 0.01,
+                               static=np.r_[np.ones(7, bool), False], ids=np.r_[-np.ones(7, int), 0])
+    v, img, best = choose_release(state, obs, GOAL, P)
+    cand = release_candidates(state, obs, GOAL, P)
+    assert cand[0].imag > 0                              # the push: away from the wall, towards the path
+    assert v[0] < 0 and np.hypot(*v) == pytest.approx(P.v_release_mps)
+    assert img.deficit[best] == img.deficit.min() < img.deficit[0]
+    # by hand: the deficit is the sum over k >= 1 of the most negative h, clipped at 0
+    i = best
+    assert img.deficit[i] >= 0 and (img.deficit == 0).sum() < len(cand)
+
+
+def test_release_from_inside_a_static_margin_backs_straight_off():
+    obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
+    planner = BigCbfPlanner(P)
+    u, info = planner.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert info.mode == "REVERSE"
+    np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)
+    # between selections the release velocity is kept (in the world frame; the body command follows the yaw)
+    u2, info2 = planner.plan(0.05, RobotState(-0.015, 0, math.pi / 2), obs, GOAL)
+    assert not info2.planned and info2.mode == "REVERSE"
+    np.testing.assert_allclose(u2, [0.0, P.v_release_mps, 0.0], atol=1e-9)
 
 
 def fake(J, accepted, modes=("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")):
