@@ -77,3 +77,36 @@ def test_ground_truth_and_wheel_odometry_are_kept_apart():
     odom, true = world.odom(), world.true_state()
     assert np.hypot(odom.px - true.px, odom.py - true.py) < 0.1     # close, as good odometry is
     assert (odom.px, odom.py) != (true.px, true.py)                  # but a separate estimate
+
+
+@pytest.mark.parametrize("u, where", [((0.4, 0.0, 0.0), "front"), ((0.0, -0.4, 0.0), "side")])
+def test_obstacles_touch_the_body_and_the_ground_touches_the_rollers(u, where):
+    """Two contact layers: driving into a wall, the wall touches the body's outline (bumper, chassis, LiDAR),
+    never a roller; the floor touches only rollers; GroundTruth reports the contact."""
+    import mujoco
+    from bigcbf.sim.scene import Wall
+    from bigcbf.sim.truth import GroundTruth
+    wall = Wall(0.45, -1.0, 0.45, 1.0) if where == "front" else Wall(-1.0, -0.4, 1.0, -0.4)
+    world = SimWorld(SceneSpec(walls=(wall,)))
+    truth = GroundTruth(world.model, world.scene)
+    m, d = world.model, world.data
+    name = lambda g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or ""
+    world.command(u)
+    touched = False
+    for _ in range(150):
+        world.step(5)
+        pairs = [(name(c.geom[0]), name(c.geom[1])) for c in d.contact[:d.ncon]]
+        for a, b in pairs:
+            assert "floor" not in (a, b) or not ({a, b} & {"chassis", "bumper", "lidar"})
+            if "wall0" in (a, b):
+                assert ({a, b} - {"wall0"}) <= {"chassis", "bumper", "lidar"}, pairs
+        if truth.in_contact(d):
+            touched = True
+            break
+    assert touched
+    # the outline that touched: the bumper is the robot's 0.30 x 0.20 m extent (wall faces 0.05 m thick)
+    x, y = d.qpos[0], d.qpos[1]
+    if where == "front":
+        assert x == pytest.approx(0.45 - 0.05 - 0.15, abs=0.01)
+    else:
+        assert y == pytest.approx(-0.4 + 0.05 + 0.10, abs=0.01)

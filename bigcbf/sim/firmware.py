@@ -49,6 +49,10 @@ class ImperfectionLayer:
         self._queue.append((apply_at, self.executed_twist(t, u)))
         return apply_at
 
+    def next_apply_time(self) -> float | None:
+        """When the oldest queued command reaches the wheels (None when none is queued)."""
+        return self._queue[0][0] if self._queue else None
+
     def at(self, t: float) -> np.ndarray:
         """The executed twist in force at time t (the newest command whose apply time has come)."""
         q = self._queue
@@ -70,11 +74,16 @@ class WheelOdometry:
         self.x, self.y, self.theta = float(x), float(y), float(theta)
         self.twist = np.zeros(3)
 
-    def update(self, wheel_speeds, dt: float, gyro_z: float | None = None) -> None:
-        self.twist = self.kin.forward(wheel_speeds)
+    def update(self, wheel_speeds, dt: float, gyro_z: float | None = None, measured=None) -> None:
+        """Integrate over dt with the wheel speeds (and yaw rate) ``wheel_speeds`` (e.g. the mean over dt, for a
+        trapezoidal step); the reported twist is that of ``measured`` (the latest reading; default: the same)."""
+        twist = self.kin.forward(wheel_speeds)
+        if gyro_z is not None:
+            twist[2] = gyro_z
+        vx, vy, wz = (float(x) for x in twist)
+        self.twist = twist if measured is None else self.kin.forward(measured)
         if gyro_z is not None:
             self.twist[2] = gyro_z
-        vx, vy, wz = (float(x) for x in self.twist)
         mid = self.theta + 0.5 * wz * dt          # midpoint heading (second order)
         c, s = math.cos(mid), math.sin(mid)
         self.x += (c * vx - s * vy) * dt

@@ -7,6 +7,7 @@
 """
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 import mujoco
@@ -60,6 +61,7 @@ class SimWorld:
         self._ctrl_for, self._ctrl = None, np.zeros(4)
         self.odometry = WheelOdometry(kinematics)
         self.reset_pose(*self.scene.robot_start)
+        self.data.ctrl[self._act] = self._ctrl
 
     # --- time ----------------------------------------------------------------------------------------------
     @property
@@ -71,7 +73,7 @@ class SimWorld:
         return float(self.model.opt.timestep)
 
     def add_pre_step(self, hook: Callable[["SimWorld"], None]) -> None:
-        """Call ``hook(world)`` before every physics step (pedestrian motion, ...)."""
+        """Call ``hook(world)`` before every block of physics steps (pedestrian motion, ...; see ``step``)."""
         self._hooks.append(hook)
 
     # --- commands and stepping -------------------------------------------------------------------------------
@@ -82,17 +84,35 @@ class SimWorld:
             raise ValueError(f"a command is a finite body twist (vx, vy, wz), got {u!r}")
         return self.imperfection.submit(self.t, u)
 
+    #: physics steps per block (10 ms): the firmware side (hooks, odometry) runs once per block, MuJoCo steps the
+    #: block in C. A block also ends when a queued command reaches the wheels, so command timing stays exact
+    #: to the physics step; the wheel odometry integrates at 100 Hz (trapezoidal in the wheel speeds), as a
+    #: robot's firmware does.
+    BLOCK_STEPS = 5
+
     def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps."""
         m, d = self.model, self.data
-        for _ in range(n):
+        dt = m.opt.timestep
+        imp = self.imperfection
+        while n > 0:
             for hook in self._hooks:
                 hook(self)
-            twist = self.imperfection.at(self.t)
+            t = d.time
+            twist = imp.at(t)
             if twist is not self._ctrl_for:            # wheel targets change only with the executed twist
                 self._ctrl_for, self._ctrl = twist, self.kin.inverse(twist)
-            d.ctrl[self._act] = self._ctrl
-            mujoco.mj_step(m, d)
-            self.odometry.update(d.qvel[self._wheel_dof], m.opt.timestep, d.sensordata[self._imu_gyro + 2])
+                d.ctrl[self._act] = self._ctrl
+            nb = min(n, self.BLOCK_STEPS)
+            nxt = imp.next_apply_time()
+            if nxt is not None:                        # stop the block where the next command takes effect
+                nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
+            w0, g0 = d.qvel[self._wheel_dof].copy(), float(d.sensordata[self._imu_gyro + 2])
+            mujoco.mj_step(m, d, nb)
+            w1 = d.qvel[self._wheel_dof]
+            self.odometry.update(0.5 * (w0 + w1), nb * dt, 0.5 * (g0 + float(d.sensordata[self._imu_gyro + 2])),
+                                 measured=w1)
+            n -= nb
 
     def advance(self, duration_s: float) -> None:
         self.step(max(0, int(round(duration_s / self.dt))))
