@@ -180,36 +180,48 @@ def feedback_velocity(e, v_max) -> np.ndarray:
     return e * (mag / np.maximum(n, _TINY))[:, None]
 
 
+def release_directions_c(qz: np.ndarray, obs_vz: np.ndarray | None) -> np.ndarray:
+    """:func:`release_directions` on complex planar vectors: qz (B, M) = p - p_i, obs_vz (M,) -> (B, M)."""
+    n = qz / np.maximum(np.abs(qz), _TINY)
+    if obs_vz is None:
+        return n
+    speed = np.abs(obs_vz)
+    right = -1j * obs_vz / np.maximum(speed, _TINY)            # the obstacle's right-hand normal (unit)
+    lateral = qz.real * right.real + qz.imag * right.imag
+    side = np.where(lateral >= 0, right, -right)
+    return np.where(speed > RELEASE_MOVING_MPS, side, n)
+
+
 def release_directions(q, obs_v) -> np.ndarray:
     """Unit directions (B, M, 2) in which to release from each obstacle: along q = p - p_i for a slow obstacle;
     for a moving one, perpendicular to its velocity, towards the robot's side of its path."""
     q = np.asarray(q, float)
-    n = q / np.maximum(np.hypot(q[..., 0], q[..., 1]), _TINY)[..., None]
-    if obs_v is None:
-        return n
-    v = np.asarray(obs_v, float)[None]
-    speed = np.hypot(v[..., 0], v[..., 1])
-    vh = v / np.maximum(speed, _TINY)[..., None]
-    right = np.stack([vh[..., 1], -vh[..., 0]], -1)
-    lateral = q[..., 0] * right[..., 0] + q[..., 1] * right[..., 1]
-    side = np.where(lateral >= 0, 1.0, -1.0)[..., None] * right
-    return np.where((speed > RELEASE_MOVING_MPS)[..., None], side, n)
+    qz = q[..., 0] + 1j * q[..., 1]
+    vz = None if obs_v is None else np.asarray(obs_v, float)[:, 0] + 1j * np.asarray(obs_v, float)[:, 1]
+    d = release_directions_c(qz, vz)
+    return np.stack([d.real, d.imag], -1)
 
 
 def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> np.ndarray:
-    """The reverse-release fallback velocity (B, 2) [m/s] (see the module docstring)."""
+    """The reverse-release fallback's push velocity (B, 2) [m/s] (see the module docstring)."""
     p = np.atleast_2d(np.asarray(p, float))
     unc = params.uncertainty
-    d_g, _, _ = goal_basis(p, goal)
-    push = np.zeros_like(p)
+    pz = p[:, 0] + 1j * p[:, 1]
+    g = complex(*np.asarray(goal, float).reshape(2)) - pz
+    back = -g / np.maximum(np.abs(g), _TINY)                       # -d_g (0 at the goal itself)
+    direction = back
     if len(obs_r):
-        q = p[:, None, :] - np.asarray(obs_p, float)[None]
-        dist = np.hypot(q[..., 0], q[..., 1])
-        w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m - dist, 0.0)
-        push = np.sum(w[..., None] * release_directions(q, obs_v), axis=1)
-    n = np.hypot(push[:, 0], push[:, 1])
-    direction = np.where((n > 1e-9)[:, None], push / np.maximum(n, _TINY)[:, None], -d_g)
-    return params.v_release_mps * direction
+        op = np.asarray(obs_p, float)
+        qz = pz[:, None] - (op[:, 0] + 1j * op[:, 1])[None]
+        w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m
+                       - np.abs(qz), 0.0)
+        if w.any():                     # (usually nothing is that close: skip the directions)
+            vz = None if obs_v is None else np.asarray(obs_v, float) @ np.array([1.0, 1j])
+            push = (w * release_directions_c(qz, vz)).sum(axis=1)
+            npush = np.abs(push)
+            direction = np.where(npush > 1e-9, push / np.maximum(npush, _TINY), back)
+    v = params.v_release_mps * direction
+    return np.stack([v.real, v.imag], -1)
 
 
 def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None,

@@ -28,7 +28,7 @@ from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
                         MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, goal_basis, mode_indices,
-                        obstacle_groups, release_directions, release_velocity, speed_limits)
+                        obstacle_groups, release_directions_c, release_velocity, speed_limits)
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
 
@@ -146,6 +146,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         cand_lo, cand_hi = -(rR + r), params.relevant_range_m + r
         corridor = base + params.d_pass_min_m
         release_reach = base + params.release_range_m
+        obs_vz = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
         flat_rows = np.arange(B) * M
         if any_pass:     # the relevant obstacle's group (Eq. (7) d_pass), from the obstacles at k = 0
             groups = obstacle_groups(obstacles.p, r, params)
@@ -202,8 +203,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                 qz = p[:, None] - Oc[k]
                 qd = np.abs(qz)
                 w = np.maximum(release_reach - qd, 0.0)
-                dirs = release_directions(np.stack([qz.real, qz.imag], -1), obstacles.v)
-                push = (w * (dirs[..., 0] + 1j * dirs[..., 1])).sum(axis=1)
+                push = (w * release_directions_c(qz, obs_vz)).sum(axis=1)
             npush = np.abs(push)
             vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * (dist > eps_g)
             v = np.where(is_rev, vr, v)

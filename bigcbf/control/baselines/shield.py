@@ -44,11 +44,15 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
     P = np.empty((B, K + 1, 2))
     Vc = np.empty((B, K, 2))
     P[:, 0] = p
+    # the yaw is held, so Eq. (1) on a world velocity v is affine: R (A_xy R^T v + d_xy) = v M^T + c
+    c = nominal_velocity(theta, np.zeros(3), ex)
+    M = np.stack([nominal_velocity(theta, body_from_world(theta, e), ex) - c for e in np.eye(2)], -1)
+    ideal = bool(np.allclose(M, np.eye(2), rtol=0, atol=1e-15) and not c.any())
     for k in range(K):
         cmd = policy(k, p, pred.p[k])
         Vc[:, k] = cmd
         v = accel_limited(v, cmd, a_max, dt)
-        p = p + dt * nominal_velocity(theta, body_from_world(theta, v), ex)
+        p = p + dt * (v if ideal else v @ M.T + c)
         P[:, k + 1] = p
     U = body_from_world(theta, Vc)
     h = barrier_along(P, np.full((B, K + 1), theta), U, pred, params)
