@@ -1,6 +1,8 @@
 """The command line, called in-process."""
 import json
 
+import pytest
+
 from bigcbf.cli import main
 
 
@@ -21,3 +23,18 @@ def test_demo_prints_commanded_and_achieved(capsys):
     assert "forward" in out and "spin" in out
     fwd = next(line for line in out.splitlines() if line.startswith("forward")).split()
     assert abs(float(fwd[4]) - 0.5) < 0.025      # achieved vx within 5 % of the commanded 0.5 m/s
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "required_sidestepping", "--seed", "-1"], "argument --seed: expected a number >= 0, got -1"),
+    (["run", "required_sidestepping", "--seed", "1.5"], "argument --seed: expected a whole number, got '1.5'"),
+    (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "inf"],
+     "argument --duration: expected a finite number, got 'inf'"),
+    (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "0"],
+     "argument --duration: expected a number > 0, got 0"),
+    (["calibrate", "log.mcap", "--coverage", "1.2"], "argument --coverage: expected a coverage in [0.5, 1), got 1.2"),
+])
+def test_bad_numbers_are_one_usage_error_naming_the_option(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

@@ -4,18 +4,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from .argtypes import float_in
+
 HELP = "calibrate tau95, the execution model (A, d, residual bound e_exec) and e_ZOH from a robot log"
-
-
-def _coverage(s: str) -> float:
-    import argparse
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
-    if not 0.5 <= v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a coverage in [0.5, 1), got {v}")
-    return v
 
 
 def add_arguments(p):
@@ -28,7 +19,7 @@ def add_arguments(p):
     p.add_argument("--odom-topic", default=None, help="odometry topic (nav_msgs/Odometry; default: found by type)")
     p.add_argument("--scan-topic", default=None, help="laser scan topic for the perception latency (default: by type)")
     p.add_argument("--no-scan", action="store_true", help="ignore scans (tau95 = actuation delay only)")
-    p.add_argument("--coverage", type=_coverage, default=0.95, help="stated coverage of the residual bound (0.95)")
+    p.add_argument("--coverage", type=float_in(0.5, 1.0, "a coverage"), default=0.95, help="stated coverage of the residual bound (0.95)")
 
 
 def run(args) -> int:

@@ -1,31 +1,12 @@
 """bigcbf record: record a calibration drive in the simulator as a robot log (ROS 2 MCAP)."""
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
+from .argtypes import nonneg_int, positive_float
+
 HELP = "record a calibration drive (steps, ramps, sweeps) of a simulated robot with a given profile as ROS 2 MCAP"
-
-
-def _positive(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {s}")
-    return v
-
-
-def _seed(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {v}")
-    return v
 
 
 def add_arguments(p):
@@ -34,8 +15,8 @@ def add_arguments(p):
                    help="the robot's imperfections (latency_s, latency_jitter_s, gain, bias, residual_max, "
                         "residual_hold_s, floor_friction); an empty file is the ideal robot")
     p.add_argument("--out", type=Path, required=True, metavar="PATH.mcap", help="the log to write")
-    p.add_argument("--seed", type=_seed, default=0, help="seed of the drive program and of the imperfections")
-    p.add_argument("--duration", type=_positive, default=120.0, metavar="S",
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the drive program and of the imperfections")
+    p.add_argument("--duration", type=positive_float, default=120.0, metavar="S",
                    help="length of the drive in seconds (default 120)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
 

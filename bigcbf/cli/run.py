@@ -1,27 +1,18 @@
 """bigcbf run: one episode of a scenario with a method and a seed."""
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
+from .argtypes import nonneg_int
+
 HELP = "run one episode (scenario name or .toml file, method, seed); print its metrics, optionally a video/log"
-
-
-def _nonneg_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {v}")
-    return v
 
 
 def add_arguments(p):
     p.add_argument("scenario", metavar="SCENARIO_OR_FILE", help="a name from 'bigcbf scenarios' or a path to a .toml")
     p.add_argument("--method", default="big-cbf", help="planner (default big-cbf); see 'bigcbf methods'")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the paired world (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
     p.add_argument("--profile", type=Path, default=None,
                    help="stack parameters / calibrated uncertainty profile TOML (default: Table I)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
