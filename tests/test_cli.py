@@ -33,6 +33,7 @@ def test_demo_prints_commanded_and_achieved(capsys):
     (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "0"],
      "argument --duration: expected a number > 0, got 0"),
     (["calibrate", "log.mcap", "--coverage", "1.2"], "argument --coverage: expected a coverage in [0.5, 1), got 1.2"),
+    (["perf", "--only", "bigcbf.nope"], "--only: unknown provider(s) bigcbf.nope; known: bigcbf.sim.perf"),
 ])
 def test_bad_numbers_are_one_usage_error_naming_the_option(argv, message, capsys):
     assert main(argv) == 2

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .argtypes import nonneg_int
+
 HELP = ("required sidestepping, CBF-only vs BIG-CBF on one seed: renders/demo_required_sidestep.mp4 and both "
         "metric rows (--manoeuvre: the scripted robot drive)")
 DEMO_SCENARIO = "required_sidestepping"
@@ -23,7 +25,7 @@ SEGMENTS = [
 
 
 def add_arguments(p):
-    p.add_argument("--seed", type=int, default=0, help="seed of the paired world (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
     p.add_argument("--video", type=Path, default=None,
                    help="output MP4 (default renders/demo_required_sidestep.mp4, or renders/demo.mp4 with --manoeuvre)")
     p.add_argument("--no-video", action="store_true", help="skip rendering, print the metrics only")

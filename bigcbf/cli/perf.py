@@ -26,6 +26,11 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    from ..errors import UserError
+    known = [spec.split(":")[0] for spec in BENCHES]
+    unknown = sorted(set(args.only or ()) - set(known))
+    if unknown:
+        raise UserError(f"--only: unknown provider(s) {', '.join(unknown)}; known: {', '.join(known)}")
     out: dict = {}
     for spec in BENCHES:
         mod_name, fn_name = spec.split(":")
