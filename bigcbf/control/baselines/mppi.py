@@ -12,11 +12,16 @@ vectorized over samples, steps and obstacles.
   np.random.default_rng(seed) created in ``reset(seed)``: an episode is deterministic per seed.
 * Rollout: Eq. (1) (nominal execution model) from the current state, obstacles by the shared prediction
   (Eqs. 2-3); the inflated radius D_i of Eq. (14) with m_i of Eq. (15) at each sample's command, kappa_exec.
-* Cost S(V^s) = sum_k dt [w_goal ||p_k - p_g|| + w_coll 1(h_min,k < 0) + w_clear exp(-d_k / l_clear)]
+* Cost S(V^s) = sum_k dt [w_goal ||p_k - p_g|| + w_coll 1(d_k < 0) + w_clear exp(-max(d_k, 0) / l_clear)]
   + w_term ||p_N - p_g|| + w_smooth sum_k ||V_k - V_{k-1}||^2 (V_{-1} = the measured velocity)
-  + lambda sum_k V_k^T Sigma^{-1} eps_k (the control-cost term of the information-theoretic update, gamma = 1),
-  with d_k = min_i ||q_i|| - D_i at step k.
+  + gamma sum_k V_k^T Sigma^{-1} eps_k (the control-cost term of the information-theoretic update, Williams'
+  gamma = lambda (1 - alpha) with alpha = 0), with d_k = min_i ||q_i|| - D_i at step k.
 * Update: w_s = exp(-(S_s - min S)/lambda) / sum; V <- V + sum_s w_s eps_s (then clipped); twice per cycle.
+  The temperature lambda is set at each update so that the weights' effective sample size 1 / sum_s w_s^2 is
+  ``ess_fraction`` of the samples (bisection on log lambda; the adaptive-temperature practice of MPPI
+  implementations): a fixed lambda is meaningless against costs whose spread changes by orders of magnitude
+  between an open floor and a crowd, and the fixed 0.1 used before let one sample take 97 % of the weight, so
+  MPPI executed that sample's white noise (0.2 m/s lateral jitter on an empty floor).
 * Warm start: the previous sequence shifted by the elapsed steps (0.5 s = 5 steps), padded with its last value.
 * Between updates the optimized sequence is followed, time-indexed: at time t the command is V_k with
   k = floor((t - t_plan) / dt) (the last element beyond the horizon). Zero inside the goal region.
@@ -44,7 +49,8 @@ class MppiParams:
     samples: int = 512                # sampled sequences per update [-]
     iterations: int = 2               # sampling updates per planning cycle [-]
     sigma_mps: float = 0.35           # exploration noise std per axis [m/s]
-    lam: float = 0.1                  # temperature lambda [cost units]
+    gamma: float = 0.1                # control-cost weight gamma [cost units]
+    ess_fraction: float = 0.1         # target effective sample size of the weights, fraction of samples [-]
     w_goal: float = 2.0               # running goal-distance cost [1/s]
     w_term: float = 10.0              # terminal goal-distance cost [1/m]
     w_coll: float = 200.0             # running penalty while inside an inflated radius [1/s]
@@ -71,6 +77,27 @@ def mppi_weights(S: np.ndarray, lam: float) -> np.ndarray:
     """w_s = exp(-(S_s - min S)/lambda) / sum_s exp(-(S_s - min S)/lambda) (Williams et al. 2017, Alg. 2)."""
     z = np.exp(-(S - np.min(S)) / lam)
     return z / z.sum()
+
+
+def effective_sample_size(w: np.ndarray) -> float:
+    """1 / sum w_s^2 (1 when one sample has all the weight, S for uniform weights)."""
+    return float(1.0 / np.dot(w, w))
+
+
+def temperature(S: np.ndarray, ess_target: float, iterations: int = 40) -> float:
+    """The lambda at which mppi_weights(S, lambda) has effective sample size ess_target (it grows monotonically
+    with lambda, from 1 to len(S)), by bisection on log lambda between 1e-6 and 1e6 times the cost spread."""
+    spread = float(np.ptp(S))
+    if not spread > 0:
+        return 1.0                                  # all costs equal: any lambda gives uniform weights
+    d = S - np.min(S)
+    lo, hi = np.log(1e-6 * spread), np.log(1e6 * spread)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        z = np.exp(-d / np.exp(mid))
+        ess = z.sum() ** 2 / np.dot(z, z)
+        lo, hi = (mid, hi) if ess < ess_target else (lo, mid)
+    return float(np.exp(0.5 * (lo + hi)))
 
 
 class MppiPlanner:
@@ -105,7 +132,7 @@ class MppiPlanner:
                                                                                  / mp.l_clear_m).sum(axis=1))
         v_prev = np.concatenate([np.broadcast_to(world_velocity(state), (len(Vs), 1, 2)), Vs[:, :-1]], axis=1)
         cost += mp.w_smooth * ((Vs - v_prev) ** 2).sum(axis=(1, 2))
-        cost += mp.lam * (self.V[None] * eps).sum(axis=(1, 2)) / mp.sigma_mps ** 2
+        cost += mp.gamma * (self.V[None] * eps).sum(axis=(1, 2)) / mp.sigma_mps ** 2
         return cost, paths
 
     def optimize(self, state: RobotState, obstacles: Obstacles, goal) -> None:
@@ -115,7 +142,12 @@ class MppiPlanner:
         for _ in range(mp.iterations):
             Vs, eps = sample_sequences(self.V, self.rng, p.v_max_mps, mp)
             S, paths = self.costs(Vs, eps, state, pred, goal)
-            w = mppi_weights(S, mp.lam)
+            finite = np.isfinite(S)
+            if not finite.any():                              # (non-finite estimates) nothing to learn from:
+                self.V = np.zeros_like(self.V)               # start over from rest rather than latch a NaN
+                continue
+            S = np.where(finite, S, S[finite].max() + 1e6)   # a non-finite cost gets no weight
+            w = mppi_weights(S, temperature(S, mp.ess_fraction * mp.samples))
             V = self.V + np.tensordot(w, eps, axes=1)
             n = np.hypot(V[:, 0], V[:, 1])
             self.V = V * np.minimum(1.0, p.v_max_mps / np.maximum(n, _TINY))[:, None]
