@@ -3,14 +3,19 @@ barrier functions: formulation and comparative study".
 
 Backup CBFs certify a state as safe when the closed-loop trajectory of a backup policy pi_b started there stays
 in the safe set over a finite horizon (the implicit safe set S_I = {x : h(phi_b(tau, x)) >= 0, tau in [0, T]}).
-A shield keeps the nominal input u_nom while the state it leads to is in S_I and otherwise moves the input
-towards the backup. Here, at every control tick:
+Chen et al. enforce membership of S_I with a QP whose constraints differentiate h(phi_b(tau, x)) along the flow
+(sensitivity matrices). The BIG-CBF paper uses Backup-CBF as a *policy shield* in front of the common hard CBF
+(Sec. IV-A), and this project's issue specifies that shield: keep u_nom while the backup rollout from the state
+it leads to stays safe, otherwise intervene. The intervention here is the interpolation between the nominal and
+the backup input (the form whose optimal blend van Wijk, Das, Molnar, Ames and Burdick 2025, "Safety-critical
+control with bounded inputs: a closed-form solution for backup control barrier functions", derive in closed
+form), searched on a grid rather than in closed form. Here, at every control tick:
 
 * Nominal: the GOAL feedback law (Eq. 8 with b = GOAL), as for CBF-only.
 * Backup policy pi_b: braking to a stop (world velocity command 0) tracked with the deceleration limit
   ``a_brake_mps2`` (:mod:`.shield`); horizon N dt = 1.5 s; safety h_i^k >= 0 with the shared D_i (Eq. 14,
   kappa_exec) against the shared prediction (Eqs. 2-3) for every obstacle and step.
-* Shield, the blending form compared by Chen et al.: candidates u_lambda = (1 - lambda) u_nom + lambda u_b for
+* Shield (interpolation): candidates u_lambda = (1 - lambda) u_nom + lambda u_b for
   lambda on the grid ``blends`` (0 = nominal, 1 = backup). For each, the state after one control step T_C
   under u_lambda (Eq. 1, nominal) is computed and the backup rollout from there (initial velocity that of
   u_lambda, obstacles predicted from T_C on) is checked. The smallest certified lambda is executed; if none is

@@ -1,11 +1,14 @@
 """Closed-loop fallback-policy rollouts shared by the two policy shields (backup-CBF and PL-CBF).
 
 A fallback policy maps (step k, robot positions (B, 2), predicted obstacles O^k) to commanded world
-velocities (B, 2). The rollout tracks the command with an acceleration limit ``a_max`` (the robot cannot stop
-instantly: :func:`~bigcbf.control.baselines.common.accel_limited`), realizes it through the nominal execution
-model of Eq. (1) (A, d; the yaw is held, wz = 0) and moves with the reached velocity (semi-implicit Euler):
+velocities (B, 2). The rollout's state is the robot's realized world velocity v (what odometry measures); a
+command asks, through the nominal execution model of Eq. (1) (A, d; the yaw is held, wz = 0), for the realized
+velocity E(c) = R(theta)(A_xy R(theta)^T c + d_xy), which the robot reaches with an acceleration limit ``a_max``
+(it cannot stop instantly: :func:`~bigcbf.control.baselines.common.accel_limited`); semi-implicit Euler:
 
-    v_{k+1} = accel_limited(v_k, pi(k, p_k, O^k)),   p_{k+1} = p_k + dt R(theta)(A_xy R(theta)^T v_{k+1} + d_xy).
+    v_{k+1} = accel_limited(v_k, E(pi(k, p_k, O^k))),   p_{k+1} = p_k + dt v_{k+1}.
+
+The initial v0 is a realized velocity too (measured, or E of the command about to be sent).
 
 Safety of a rollout is the shared barrier h_i^k >= 0 (Eq. 14, D_i with kappa_exec and m_i of Eq. 15 at the
 rollout command) for every obstacle i and every state k = 0..K against the shared prediction (Eqs. 2-3).
@@ -44,15 +47,15 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
     P = np.empty((B, K + 1, 2))
     Vc = np.empty((B, K, 2))
     P[:, 0] = p
-    # the yaw is held, so Eq. (1) on a world velocity v is affine: R (A_xy R^T v + d_xy) = v M^T + c
+    # the yaw is held, so Eq. (1) on a world command is affine: E(cmd) = R (A_xy R^T cmd + d_xy) = cmd M^T + c
     c = nominal_velocity(theta, np.zeros(3), ex)
     M = np.stack([nominal_velocity(theta, body_from_world(theta, e), ex) - c for e in np.eye(2)], -1)
     ideal = bool(np.allclose(M, np.eye(2), rtol=0, atol=1e-15) and not c.any())
     for k in range(K):
         cmd = policy(k, p, pred.p[k])
         Vc[:, k] = cmd
-        v = accel_limited(v, cmd, a_max, dt)
-        p = p + dt * (v if ideal else v @ M.T + c)
+        v = accel_limited(v, cmd if ideal else cmd @ M.T + c, a_max, dt)
+        p = p + dt * v
         P[:, k + 1] = p
     U = body_from_world(theta, Vc)
     h = barrier_along(P, np.full((B, K + 1), theta), U, pred, params)
