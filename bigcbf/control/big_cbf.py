@@ -14,7 +14,7 @@ from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
 from .imagination import Imagination, choose_release, imagine
-from .planner import PlanInfo
+from .planner import PlanInfo, clip_command
 from .selection import BehaviorSelector, Selection
 
 _T_EPS = 1e-6   # tolerance of the selection clock [s] (control ticks are floats)
@@ -72,5 +72,6 @@ class BigCbfPlanner:
                 nxt += self.params.T_B_s
             self._next_t = nxt
         mode = self.selector.mode
-        u = behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v)     # Eq. (5)
+        u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
+                         self.params)                                                         # Eq. (5)
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path)

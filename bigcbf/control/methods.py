@@ -12,7 +12,7 @@ from ..registry import Registry
 from ..types import Obstacles, RobotState
 from .behaviors import behavior_command
 from .big_cbf import BigCbfPlanner
-from .planner import PlanInfo, Planner
+from .planner import PlanInfo, Planner, clip_command
 
 METHODS: Registry[Callable[[StackParams], Planner]] = Registry("method")
 
@@ -30,8 +30,9 @@ class CbfOnlyPlanner:
 
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
-        u = behavior_command("GOAL", state, obstacles, np.asarray(goal, float).reshape(2), self.params)
-        return u, PlanInfo(mode="GOAL", planned=False, planner_ms=(time.perf_counter() - t0) * 1e3, path=None)
+        u = clip_command(behavior_command("GOAL", state, obstacles, np.asarray(goal, float).reshape(2), self.params),
+                         self.params)
+        return u, PlanInfo(mode="GOAL", planned=True, planner_ms=(time.perf_counter() - t0) * 1e3, path=None)
 
 
 METHODS.register("big-cbf", lambda params: BigCbfPlanner(params, shared=True))

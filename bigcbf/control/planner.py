@@ -6,7 +6,10 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
+
+_TINY = 1e-12
 
 
 @dataclass
@@ -31,3 +34,15 @@ class Planner(Protocol):
     def plan(self, t: float, state: RobotState, obstacles: Obstacles,
              goal: np.ndarray) -> tuple[np.ndarray, PlanInfo]:
         ...
+
+
+def clip_command(u, params: StackParams) -> np.ndarray:
+    """Clip a body twist (..., 3) to the translational speed limit v_max_mps and the actuator box: every method's
+    u_in passes through this, so that the common filter's own box clip never counts in E_CBF for one method
+    and not another."""
+    u = np.array(u, float)
+    n = np.hypot(u[..., 0], u[..., 1])
+    scale = np.minimum(1.0, params.v_max_mps / np.maximum(n, _TINY))
+    u[..., 0] *= scale
+    u[..., 1] *= scale
+    return np.clip(u, np.asarray(params.u_min, float), np.asarray(params.u_max, float))

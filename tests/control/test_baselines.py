@@ -9,7 +9,7 @@ from bigcbf.control.baselines.apf import ApfParams, attractive_velocity, repulsi
 from bigcbf.control.baselines.backup_cbf import BackupCbfPlanner
 from bigcbf.control.baselines.common import accel_limited, barrier_along, integrate, predict
 from bigcbf.control.baselines.dwa import DwaParams, window_samples
-from bigcbf.control.baselines.mppi import MppiPlanner, mppi_weights
+from bigcbf.control.baselines.mppi import MppiPlanner, effective_sample_size, mppi_weights, temperature
 from bigcbf.control.baselines.pl_cbf import PlCbfPlanner
 from bigcbf.control.baselines.shield import rollout
 from bigcbf.params import SIMULATION
@@ -137,6 +137,19 @@ def test_accel_limited_and_brake_rollout_by_hand():
                  predict(Obstacles.empty(), P, 6, 0.1), P, 2.0)
     np.testing.assert_allclose(ro.p[0, :, 0], [0.0, 0.06, 0.10, 0.12, 0.12, 0.12, 0.12], atol=1e-12)
     assert ro.h_min[0] == np.inf
+    # with an execution gain the state is the realized velocity and commands go through Eq. (1) once:
+    # A_xx = 0.5, bias 0.1 m/s; commanding 1.0 m/s asks for 0.5 * 1.0 + 0.1 = 0.6 m/s, which the robot already
+    # does: it keeps 0.6 m/s (positions 0.06 k), and commanding 0 asks for the bias 0.1 m/s
+    import dataclasses
+    from bigcbf.params.stack import ExecutionModel
+    ex = ExecutionModel(A=((0.5, 0, 0), (0, 1, 0), (0, 0, 1)), d=(0.1, 0.0, 0.0))
+    Pg = dataclasses.replace(P, uncertainty=dataclasses.replace(P.uncertainty, execution=ex))
+    pred = predict(Obstacles.empty(), Pg, 4, 0.1)
+    ro = rollout(np.zeros((1, 2)), np.array([[0.6, 0.0]]), 0.0, lambda k, p, o: np.tile([1.0, 0.0], (len(p), 1)),
+                 pred, Pg, 2.0)
+    np.testing.assert_allclose(ro.p[0, :, 0], [0.0, 0.06, 0.12, 0.18, 0.24], atol=1e-12)
+    ro = rollout(np.zeros((1, 2)), np.array([[0.3, 0.0]]), 0.0, lambda k, p, o: np.zeros_like(p), pred, Pg, 2.0)
+    np.testing.assert_allclose(ro.p[0, :, 0], [0.0, 0.01, 0.02, 0.03, 0.04], atol=1e-12)   # 0.3 -> 0.1 in 0.1 s
 
 
 def test_backup_cbf_keeps_nominal_far_and_intervenes_near():
@@ -167,3 +180,31 @@ def test_pl_cbf_keeps_nominal_far_and_picks_a_certified_policy_near():
     u, info = pl.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
     assert info.mode != "NOMINAL"
     assert not (u[0] > 0.5 and abs(u[1]) < 0.1)      # not driving on towards it
+
+
+def test_mppi_temperature_hits_the_target_effective_sample_size():
+    # two costs 0 and 1: w = (1, e^-1/l) / (1 + e^-1/l); ESS = (1 + z)^2 / (1 + z^2) = 1.5 at z = 2 - sqrt(3)
+    # (by hand: (1 + z)^2 = 1.5 (1 + z^2) <=> z^2 - 4 z + 1 = 0), i.e. lambda = -1 / ln(2 - sqrt(3))
+    lam = temperature(np.array([0.0, 1.0]), 1.5)
+    assert lam == pytest.approx(-1.0 / np.log(2.0 - np.sqrt(3.0)), rel=1e-6)
+    S = np.random.default_rng(0).normal(60.0, 3.0, 512)
+    assert effective_sample_size(mppi_weights(S, temperature(S, 51.2))) == pytest.approx(51.2, rel=1e-6)
+    assert temperature(np.full(4, 7.0), 2.0) == 1.0                    # equal costs: uniform weights anyway
+
+
+def test_mppi_open_floor_command_is_smooth():
+    """The weighted update averages out the sampling noise: on an empty floor the command heading for the goal
+    stays within a few cm/s of the goal line (a too-cold temperature executed one noisy sample: 0.2 m/s std)."""
+    pl = MppiPlanner(P)
+    pl.reset(0)
+    state, us = RobotState(0.0, 0.0, 0.0), []
+    for k in range(40):
+        u, _ = pl.plan(0.05 * k, state, Obstacles.empty(), np.array([8.0, 0.0]))
+        us.append(u)
+        state = RobotState(state.px + 0.05 * u[0], state.py + 0.05 * u[1], 0.0, *u)
+    us = np.array(us)
+    assert np.std(us[:, 1]) < 0.08 and np.mean(us[:, 0]) > 0.4
+    # a non-finite estimate never latches a NaN into the warm start
+    bad = Obstacles.from_lists([[np.nan, 0.0]], r=0.2)
+    u, _ = pl.plan(2.0, state, bad, np.array([8.0, 0.0]))
+    assert np.all(np.isfinite(pl.V)) and np.all(np.isfinite(u))

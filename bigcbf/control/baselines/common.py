@@ -14,6 +14,7 @@ import numpy as np
 
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
+from ..planner import clip_command  # noqa: F401  (re-exported for the baselines)
 from ..prediction import predict_obstacles, q_sigma_for
 from ..uncertainty import barrier, inflated_radius, nominal_velocity, rotation, uncertainty_radius
 
@@ -109,16 +110,6 @@ def surface_distance(paths: np.ndarray, theta: np.ndarray, u: np.ndarray, pred: 
     qn = np.hypot(*(paths[:, :, None, :] - pred.p[None]).transpose(3, 0, 1, 2))
     D = np.sqrt(np.maximum(qn * qn - h, 0.0))
     return qn - D
-
-
-def clip_command(u, params: StackParams) -> np.ndarray:
-    """Clip a body twist (..., 3) to the translational speed limit v_max_mps and the actuator box."""
-    u = np.array(u, float)
-    n = np.hypot(u[..., 0], u[..., 1])
-    scale = np.minimum(1.0, params.v_max_mps / np.maximum(n, _TINY))
-    u[..., 0] *= scale
-    u[..., 1] *= scale
-    return np.clip(u, np.asarray(params.u_min, float), np.asarray(params.u_max, float))
 
 
 def at_goal(state: RobotState, goal: np.ndarray, params: StackParams) -> bool:
