@@ -144,7 +144,7 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
     """
     from tqdm import tqdm
 
-    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    log = log or (lambda msg: tqdm.write(msg, file=sys.stderr))     # (above the progress bar, when there is one)
     tasks, methods, scenarios = plan(config)
     out = _prepare_out(config.out)
     lock = _DirLock(out)
@@ -170,8 +170,8 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
                 bar.update(1)
                 if row["status"] == "error":
                     errors_now += 1
-                    bar.write(f"bench: error in {row['scenario']} / {row['method']} / seed {row['seed']}: "
-                              f"{row['error'].splitlines()[0]}", file=sys.stderr)
+                    log(f"bench: error in {row['scenario']} / {row['method']} / seed {row['seed']}: "
+                        f"{row['error'].splitlines()[0]}")
 
             completed = False
             try:
