@@ -151,9 +151,12 @@ class RobotLog:
                             file=str(self.path)) from None
         store = get_typestore(Stores.EMPTY)
         types: dict[str, str] = {}
+        foreign = set()
         for ch in channels.values():
             sc = schemas.get(ch.schema_id)
             if sc is None or sc.encoding != "ros2msg" or ch.message_encoding != "cdr":
+                foreign.add(f"{ch.message_encoding} messages"
+                            + (f" with {sc.encoding or 'no'} schemas" if sc is not None else ""))
                 continue
             try:
                 store.register(get_types_from_msg(sc.data.decode(), sc.name))
@@ -162,6 +165,10 @@ class RobotLog:
                 continue
             types[ch.topic] = sc.name
         raw = [r for r in raw if r[0] in types]
+        if not raw and foreign:
+            self._cleanup()
+            raise UserError(f"not a ROS 2 log: this MCAP holds {', '.join(sorted(foreign))}; bigcbf reads ROS 2 "
+                            "MCAP (ros2msg schemas, CDR messages), ROS 1 bags and ROS 2 bags", file=str(self.path))
         raw.sort(key=lambda r: r[1])
         self._raw, self._types, self._typestore = raw, types, store
         self.recovered = True
@@ -205,20 +212,35 @@ class RobotLog:
         if unknown:
             raise UserError(f"no topic {', '.join(unknown)} in the log; it has: {describe_topics(self.topics)}",
                             file=str(self.path))
+        last = None
         if self._reader is not None:
             conns = [c for c in self._reader.connections if c.topic in set(topics)]
             try:
                 for c, t, raw in self._reader.messages(connections=conns):
-                    yield c.topic, t * 1e-9, self._reader.deserialize(raw, c.msgtype)
+                    msg = self._reader.deserialize(raw, c.msgtype)
+                    last = t
+                    yield c.topic, t * 1e-9, msg
+                return
             except UserError:
                 raise
             except Exception as exc:      # noqa: BLE001
-                raise UserError(f"corrupt log, a message cannot be read: {_reason(exc)}", file=str(self.path)) from None
-        else:
-            want = set(topics)
-            for topic, t, data in self._raw:
-                if topic in want:
-                    yield topic, t * 1e-9, self._typestore.deserialize_cdr(data, self._types[topic])
+                if self.format != "mcap":
+                    hint = {"ros1": " (rosbag reindex may repair it)", "ros2": " (ros2 bag reindex may repair it)"}
+                    raise UserError(f"corrupt log, a message cannot be read: {_reason(exc)}"
+                                    f"{hint.get(self.format, '')}", file=str(self.path)) from None
+                # a damaged chunk inside an MCAP whose index is intact: go on record by record up to the damage
+                self._reader.close()
+                self._reader = None
+                self._recover_mcap(exc)
+        want = set(topics)
+        for topic, t, data in self._raw:
+            if topic in want and (last is None or t > last):
+                try:
+                    msg = self._typestore.deserialize_cdr(data, self._types[topic])
+                except Exception as exc:  # noqa: BLE001
+                    raise UserError(f"corrupt log, a message on {topic} cannot be decoded: {_reason(exc)}",
+                                    file=str(self.path)) from None
+                yield topic, t * 1e-9, msg
 
     # --- life cycle ------------------------------------------------------------------------------------------
     def _cleanup(self) -> None:

@@ -85,6 +85,45 @@ def test_truncated_mcap_is_read_up_to_the_damage(tmp_path):
     np.testing.assert_allclose(d.cmd.u, levels[d.cmd.t.astype(int)])
 
 
+def test_mcap_with_a_damaged_chunk_in_the_middle_is_read_up_to_it(tmp_path):
+    """Footer and index intact, one chunk in the middle corrupted: the messages before the damage are used."""
+    from mcap.reader import make_reader
+    full = _drive_log(tmp_path / "full.mcap")
+    with open(full, "rb") as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    c = chunks[len(chunks) // 2]
+    data = bytearray(full.read_bytes())
+    mid = c.chunk_start_offset + c.chunk_length // 2
+    data[mid:mid + 64] = bytes(64)                  # zero a stretch inside the middle chunk's compressed records
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with open_log(bad) as log:
+        d = read_series(log, cmd="/cmd_vel", odom="/odom")
+        assert any("damaged MCAP" in w for w in d.warnings)
+    assert 5.0 < d.cmd.t[-1] < 35.0 and np.all(np.diff(d.cmd.t) > 0)
+    rng = np.random.default_rng(0)
+    levels = rng.uniform(-0.5, 0.5, (40, 3))
+    np.testing.assert_allclose(d.cmd.u, levels[d.cmd.t.astype(int)])
+
+
+def test_mcap_that_is_not_ros2_says_so(tmp_path):
+    import json
+
+    from mcap.writer import Writer
+    p = tmp_path / "foxglove.mcap"
+    with open(p, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("Pose", "jsonschema", b'{"type": "object"}')
+        cid = w.register_channel("/pose", "json", sid)
+        for k in range(10):
+            w.add_message(cid, log_time=k * 10**8, publish_time=k * 10**8, data=json.dumps({"x": k}).encode())
+        w.finish()
+    with pytest.raises(UserError, match="not a ROS 2 log: this MCAP holds json messages with jsonschema") as e:
+        open_log(p)
+    assert e.value.file == str(p)
+
+
 def test_mcap_cut_before_any_message(tmp_path):
     full = _drive_log(tmp_path / "full.mcap", seconds=5)
     cut = tmp_path / "cut.mcap"
