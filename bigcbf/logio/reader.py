@@ -2,9 +2,10 @@
 
 The format is recognised from the content, not the name: a ROS 2 bag folder named ``*.bag`` or a ROS 1 bag
 without the ``.bag`` suffix open as what they are. Every problem with the file is a UserError naming it: missing,
-empty, not a log, truncated or corrupt. A truncated MCAP file (no footer, e.g. the recorder crashed) is read up
-to its last complete chunk, with a warning in ``RobotLog.warnings``: the messages recovered are whole and in
-time order, so using them is sound; what was lost is only the end of the recording.
+empty, not a log (an MCAP of other encodings than ROS 2 CDR is named as such), truncated or corrupt. A truncated
+MCAP file (no footer, e.g. the recorder crashed) is read up to its last complete chunk, and an MCAP with a damaged
+chunk up to that chunk, with a warning in ``RobotLog.warnings``: the messages recovered are whole and in time
+order, so using them is sound; what was lost is only the rest of the recording.
 
 Times: ``t`` is the log (receive) time in seconds, which is what the analyses use. Header stamps are returned
 separately; they can be on another clock than the log.
