@@ -12,8 +12,15 @@ Steps (each module documents its method):
    log does not excite reported as not identified;
 3. residual bound (twin.residual): conformal quantile of ||r_xy|| per command-speed bin on the settled,
    unsaturated samples of the calibration blocks, coverage checked on the held-out time blocks (the error right
-   after a command change is the delay's, which the relative-motion delay term of Eq. (15) covers);
+   after a command change is the delay's, which the relative-motion delay term of Eq. (15) covers); the coverage
+   on every held-out sample, transients included, is reported too (``coverage_heldout_transients``), and a
+   held-out coverage more than 3 points below the stated one is a warning;
 4. e_ZOH (:func:`zoh_displacement`) from the log's command period and measured speeds.
+
+Commands are held between messages, as most drivers do (a TurtleBot3 holds its last cmd_vel). A robot whose
+firmware stops on a command timeout is told by ``max_command_age_s`` (``--cmd-timeout``): samples whose command is
+older than that when it should act are left out of every step but the delay's (holding the last command there
+would pair it with a stopped robot). Without it, gaps over 0.5 s in the command stream are a note.
 """
 from __future__ import annotations
 
@@ -29,8 +36,8 @@ from bigcbf.params.stack import ExecutionModel, StackParams
 from bigcbf.params.toml_io import from_dict, to_dict
 
 from .delay import DelayEstimate, DelayOptions, estimate_delay
-from .execution import (AXES, ExecutionFit, ExecutionOptions, fit_execution, identified_axes, saturated_samples,
-                        settled_samples)
+from .execution import (AXES, ExecutionFit, ExecutionOptions, fit_execution, identified_axes, input_condition,
+                        saturated_samples, settled_samples)
 from .residual import ResidualBound, ResidualOptions, calibrate_bound, holdout_mask
 from .signals import intervals, quantile_upper, zoh
 
@@ -44,6 +51,9 @@ class CalibrationOptions:
     residual: ResidualOptions = ResidualOptions()
     period_quantile: float = 0.95     # T_C: this quantile of the intervals between commands [-]
     speed_quantile: float = 0.99      # v of e_ZOH: this quantile of the measured ||v_xy|| [-]
+    max_command_age_s: float | None = None   # the robot's command timeout, if it has one (module docstring) [s]
+    coverage_warn: float = 0.03       # a held-out coverage this far below the stated one is a warning [-]
+    condition_warn: float = 30.0      # the input condition number above which the axes are not separable [-]
 
 
 @dataclass
@@ -60,6 +70,7 @@ class Calibration:
     speed_mps: float                 # the speed quantile used by e_ZOH [m/s]
     e_zoh_m: float
     residual_horizon_s: float
+    coverage_heldout_transients: float   # the bound's coverage on every unsaturated held-out sample
     rmse_nominal: np.ndarray         # (3,) on the held-out samples, nominal model v(t) = u(t) (no delay, A = I)
     rmse_identity: np.ndarray        # (3,) on the held-out samples, v(t) = u(t - delay) (A = I, d = 0)
     rmse_model: np.ndarray           # (3,) on the held-out samples, model v = A u + d
@@ -105,7 +116,9 @@ class Calibration:
                        "residual_bound_mps": self.bound.bound_knots.tolist(),
                        "residual_horizon_s": self.residual_horizon_s,
                        "coverage": self.bound.coverage, "coverage_calibration": self.bound.coverage_calibration,
-                       "coverage_heldout": self.bound.coverage_heldout},
+                       "coverage_heldout": self.bound.coverage_heldout,
+                       "coverage_heldout_final_block": self.bound.coverage_tail,
+                       "coverage_heldout_transients": self.coverage_heldout_transients},
             "e_zoh_m": self.e_zoh_m, "control_period_s": self.control_period_s, "speed_mps": self.speed_mps,
             "rmse_heldout": {"nominal": dict(zip(AXES, map(float, self.rmse_nominal))),
                              "identity": dict(zip(AXES, map(float, self.rmse_identity))),
@@ -154,6 +167,11 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     # delay-aligned samples at the odometry times
     tau = delay.xcorr_s
     keep = (odom.t - tau >= cmd.t[0]) & (odom.t - tau <= cmd.t[-1] + opt.delay.max_gap_s)
+    last_cmd = cmd.t[np.clip(np.searchsorted(cmd.t, odom.t - tau, side="right") - 1, 0, len(cmd.t) - 1)]
+    age = odom.t - tau - last_cmd
+    stale = keep & (age > opt.max_command_age_s) if opt.max_command_age_s is not None else np.zeros_like(keep)
+    keep &= ~stale
+    gaps = intervals(cmd.t)
     t = odom.t[keep]
     u = zoh(cmd.t, cmd.u, t - tau)
     v = odom.twist[keep]
@@ -176,22 +194,44 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     speed = np.hypot(u[:, 0], u[:, 1])
     resid = np.hypot(r[:, 0], r[:, 1])
     bound = calibrate_bound(t[use], speed[use], resid[use], opt.residual, held=held[use])
+    unsat_held = held & ~sat
+    cov_all = float((resid[unsat_held] <= bound(speed[unsat_held])).mean()) if unsat_held.any() else float("nan")
     e_zoh, T_C, v_q = zoh_displacement(cmd.t, odom.twist, opt.period_quantile, opt.speed_quantile)
     ho = held & use
     warnings = list(data.warnings)
+    if stale.any():
+        warnings.append(f"{int(stale.sum())} odometry samples left out: their command was older than the command "
+                        f"timeout {opt.max_command_age_s} s (gaps in {cmd.topic})")
+    elif opt.max_command_age_s is None and len(gaps) and gaps.max() > 0.5:
+        warnings.append(f"{cmd.topic} has gaps of up to {gaps.max():.2f} s; the last command was held through them "
+                        "(if the robot stops on a command timeout, give it: --cmd-timeout)")
+    for name, cov in (("held-out blocks", bound.coverage_heldout), ("final held-out block", bound.coverage_tail)):
+        if cov < bound.coverage - opt.coverage_warn:
+            warnings.append(f"the residual bound covers {cov:.3f} of the {name}, below the stated {bound.coverage}: "
+                            "the log's residuals are not stationary; calibrate on a longer or steadier log")
+    cond = input_condition(u[~held & settled], axes)
+    if cond > opt.condition_warn:
+        warnings.append(f"the commanded axes {', '.join(a for a, x in zip(AXES, axes) if x)} move together "
+                        f"(condition number {cond:.0f}): each is excited, but their cross gains in A cannot be "
+                        "told apart; excite them independently for a full A")
+    v_stack = StackParams().v_max_mps
+    if v_q < v_stack - 1e-9:
+        warnings.append(f"the log's speed ({v_q:.2f} m/s, the {opt.speed_quantile:.0%} quantile) is below the "
+                        f"stack's limit {v_stack} m/s: e_ZOH = T_C v and the residual bound above "
+                        f"{bound.speed_knots[-1]:.2f} m/s are extrapolated from slower driving")
     if not fit.settled_only:
         warnings.append(f"only {int(settled[~held].sum())} samples with a settled command in the calibration blocks: "
                         "A and d were fitted on every sample (transients included, gains may read low)")
     for j in np.flatnonzero(~axes):
         warnings.append(f"{AXES[j]} is not identified: the log does not excite it (identity row kept in A, no bias)")
-    counts = {"commands": int(len(cmd.t)), "odometry": int(len(odom.t)), "scans": int(0 if scan is None else len(scan.t)),
+    counts = {"stale": int(stale.sum()), "commands": int(len(cmd.t)), "odometry": int(len(odom.t)), "scans": int(0 if scan is None else len(scan.t)),
               "aligned": int(len(t)), "settled": int(settled.sum()), "calibration": int((~held & use).sum()),
               "heldout": int(ho.sum()),
               "saturated": int(sat.sum()), "fit": int(fit.n_used), "edges": int(len(delay.edge_delays_s))}
     return Calibration(
         log=path, topics={"commands": cmd.topic, "odometry": odom.topic, "scans": None if scan is None else scan.topic},
         duration_s=float(t[-1] - t[0]), delay=delay, fit=fit, bound=bound, control_period_s=T_C, speed_mps=v_q,
-        e_zoh_m=e_zoh, residual_horizon_s=T_C + delay.tau95_s,
+        e_zoh_m=e_zoh, residual_horizon_s=T_C + delay.tau95_s, coverage_heldout_transients=cov_all,
         rmse_nominal=_rmse((v - zoh(cmd.t, cmd.u, t))[ho]), rmse_identity=_rmse((v - u)[ho]),
         rmse_model=_rmse(r[ho]), counts=counts,
         aligned={"t": t, "u": u, "v": v, "held": held, "saturated": sat, "settled": settled, "used": use,
@@ -256,7 +296,8 @@ def summary_lines(cal: Calibration) -> list[str]:
     lines += [f"e_exec         horizon {cal.residual_horizon_s:.3f} s x bound(|u_xy|): "
               + ", ".join(f"{s:.2f} m/s -> {v:.4f}" for s, v in zip(b.speed_knots, b.bound_knots)),
               f"coverage       stated {b.coverage:.3f}, calibration {b.coverage_calibration:.3f}, held-out "
-              f"{b.coverage_heldout:.3f}",
+              f"{b.coverage_heldout:.3f} (final block {b.coverage_tail:.3f}; with transients "
+              f"{cal.coverage_heldout_transients:.3f})",
               f"e_ZOH          {cal.e_zoh_m:.4f} m  (T_C {cal.control_period_s:.3f} s x v {cal.speed_mps:.3f} m/s)",
               "held-out RMSE  nominal v=u(t) " + fmt(cal.rmse_nominal) + "   v=u(t-delay) " + fmt(cal.rmse_identity)
               + "   fitted " + fmt(cal.rmse_model),

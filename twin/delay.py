@@ -10,8 +10,10 @@ Three measurements, all on log (receive) times; header stamps are used only when
    and after), the time from the command to the measured response crossing half-way between its settled
    levels before and after (and staying past it for two samples, so that a noise spike is not a crossing). For a dead time L followed by a first-order lag T this is L + T ln 2.
 3. perception latency per command: the age of the newest scan at the time the command was sent (the command can
-   only be based on that scan): t_cmd - t_acq, with t_acq the scan's header stamp when the stamps are on the
-   log's clock (else its log time).
+   only be based on that scan): t_cmd - t_acq. t_acq is the scan's log time unless its header stamps are on the
+   log's clock: ``scan_clock`` "auto" takes the stamps when the median of (log time - stamp) lies in
+   [-0.05, ``max_stamp_offset_s``] (a driver's acquisition-to-log latency; beyond it, or negative, the stamps are
+   on another clock), "stamps" and "log" force one or the other. The offset found is reported in the notes.
 
 tau95 is the 95th percentile of (actuation delay + perception latency), the two taken as independent: every
 per-edge delay is paired with every latency.
@@ -34,10 +36,12 @@ class DelayOptions:
     max_gap_s: float = 0.25          # odometry gaps longer than this are not interpolated across [s]
     edge_min: tuple[float, float, float] = (0.05, 0.05, 0.1)   # smallest command step that is an edge (m/s, m/s, rad/s)
     edge_hold_s: float = 0.35        # the command must be held this long before and after an edge [s]
-    settle_window_s: float = 0.1     # settled levels are averaged over this window [s]
+    settle_window_s: float = 0.1     # settled levels are averaged over this window, at least 2.5 odometry periods [s]
     min_response: float = 0.3        # the measured step must be at least this fraction of the commanded one [-]
     quantile: float = 0.95           # tau95's quantile [-]
     min_edges: int = 5               # fewer clean edges: the distribution is the cross-correlation delay alone
+    scan_clock: str = "auto"         # scan acquisition times: "auto", "stamps" (header stamps) or "log" (log times)
+    max_stamp_offset_s: float = 0.3  # "auto": stamps this much older than their log times are still the log's clock [s]
 
 
 @dataclass
@@ -105,6 +109,8 @@ def edge_delays(t_cmd, u_cmd, t_odom, v_odom, axes, opt: DelayOptions) -> tuple[
     """Per-edge delays [s] (method 2 of the module docstring). Returns (delays, edge log times, axis of each)."""
     t_cmd = np.asarray(t_cmd, float)
     out_d, out_t, out_a = [], [], []
+    dt_odom = float(np.median(np.diff(t_odom))) if len(t_odom) > 1 else 0.0
+    w = max(opt.settle_window_s, 2.5 * dt_odom)        # at least two odometry samples per settled level
     for j in axes:
         u = u_cmd[:, j]
         change = np.flatnonzero(np.abs(np.diff(u)) > 1e-9) + 1          # command indices where axis j changes
@@ -120,7 +126,6 @@ def edge_delays(t_cmd, u_cmd, t_odom, v_odom, axes, opt: DelayOptions) -> tuple[
                 continue
             if te - prev_times[k] < opt.edge_hold_s or next_times[k] - te < opt.edge_hold_s:
                 continue
-            w = opt.settle_window_s
             pre = (t_odom >= te - w) & (t_odom < te)
             t_end = next_times[k]
             post = (t_odom >= t_end - w) & (t_odom < t_end)
@@ -145,21 +150,30 @@ def edge_delays(t_cmd, u_cmd, t_odom, v_odom, axes, opt: DelayOptions) -> tuple[
     return np.array(out_d), np.array(out_t), np.array(out_a, int)
 
 
-def scan_clock(t_scan, stamp_scan) -> str:
+def stamp_offset(t_scan, stamp_scan) -> float:
+    """The median of (log time - header stamp) of the scans [s]."""
+    return float(np.median(np.asarray(t_scan, float) - np.asarray(stamp_scan, float)))
+
+
+def scan_clock(t_scan, stamp_scan, max_offset_s: float = 0.3) -> str:
     """Whether scan header stamps are on the log's clock: "header stamps" if the median of (log time - stamp) is
-    within [-0.05, 1.0] s, else "log times" (stamps on another clock, or a log written after the fact)."""
-    off = np.median(np.asarray(t_scan) - np.asarray(stamp_scan))
-    return "header stamps" if -0.05 <= off <= 1.0 else "log times"
+    within [-0.05, max_offset_s] s, else "log times" (stamps on another clock, or a log written after the fact)."""
+    return "header stamps" if -0.05 <= stamp_offset(t_scan, stamp_scan) <= max_offset_s else "log times"
 
 
-def perception_latency(t_cmd, t_scan, stamp_scan) -> tuple[np.ndarray, str]:
-    """Age [s] of the newest scan when each command was sent (method 3 of the module docstring).
+def perception_latency(t_cmd, t_scan, stamp_scan, clock: str = "auto",
+                       max_offset_s: float = 0.3) -> tuple[np.ndarray, str]:
+    """Age [s] of the newest scan when each command was sent (method 3 of the module docstring); ``clock``
+    "auto", "stamps" or "log" chooses the acquisition times.
 
     Commands before the first scan are left out. Returns (latencies, source of the acquisition times)."""
     t_scan = np.asarray(t_scan, float)
     if len(t_scan) == 0:
         return np.zeros(0), "no scans"
-    source = scan_clock(t_scan, stamp_scan)
+    if clock not in ("auto", "stamps", "log"):
+        raise ValueError(f"clock must be auto, stamps or log, got {clock!r}")
+    source = {"stamps": "header stamps", "log": "log times"}.get(clock) or scan_clock(t_scan, stamp_scan,
+                                                                                    max_offset_s)
     acq = np.minimum(np.asarray(stamp_scan, float), t_scan) if source == "header stamps" else t_scan
     order = np.argsort(t_scan, kind="stable")
     t_recv, acq = t_scan[order], acq[order]
@@ -192,10 +206,17 @@ def estimate_delay(t_cmd, u_cmd, t_odom, v_odom, axes, t_scan=None, stamp_scan=N
         actuation = d_edge
     else:
         actuation = np.array([d_xc])
-        notes.append(f"only {len(d_edge)} clean command steps: the actuation delay distribution is the "
-                     f"cross-correlation delay alone")
+        notes.append(f"only {len(d_edge)} clean command steps (a step held {opt.edge_hold_s} s before and after, "
+                     f"at least {opt.edge_min} on an axis): the actuation delay distribution is the "
+                     f"cross-correlation delay alone, the dead time without the response's rise")
+    if not 0 < d_xc < opt.max_delay_s:
+        notes.append(f"the cross-correlation peaks at the edge of the search range ({d_xc:.3f} s of "
+                     f"0..{opt.max_delay_s} s): the actuation delay is unreliable")
     if t_scan is not None and len(t_scan):
-        lat, source = perception_latency(t_cmd, t_scan, stamp_scan)
+        lat, source = perception_latency(t_cmd, t_scan, stamp_scan, opt.scan_clock, opt.max_stamp_offset_s)
+        off = stamp_offset(t_scan, stamp_scan)
+        notes.append(f"scan acquisition from {source} (median log time - header stamp {off:+.3f} s"
+                     + (", so the acquisition-to-log latency is not counted)" if source == "log times" else ")"))
     else:
         lat, source = np.zeros(0), "no scans"
         notes.append("no scans in the log: tau95 holds the actuation delay only")

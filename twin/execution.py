@@ -10,9 +10,11 @@ Samples are the odometry messages; each is paired with the command in force one 
   inputs k (scipy.linalg.lstsq), on the *settled* samples: those whose command (delay-aligned) has been held,
   within ``hold_tol`` per axis, for at least ``settle_s``. Eq. (1) is a static map; right after a command
   change the velocity is still on its way (the wheels' acceleration is limited, more so in combined motions),
-  and fitting those samples would bias the gains low. The transients are not hidden: the residual bound is
-  computed on every sample (twin.residual). Fewer than ``min_settled`` settled samples (a log from a planner
-  whose command never rests): all samples are used, with a note.
+  and fitting those samples would bias the gains low. The residual bound uses the same settled samples (see
+  twin.calibrate: right after a change the error is the delay's, which Eq. (15)'s relative-motion delay term
+  covers); the coverage on every held-out sample, transients included, is reported beside it. Fewer than
+  ``min_settled`` settled samples (a log from a planner whose command never rests): all samples are used, with
+  a note.
 - Saturated samples are left out: where the drive could not realise the command (a wheel at its limit), the
   measured velocity falls short of the model's prediction along the predicted direction. With the prediction p
   and measurement m scaled per axis by the command's spread, the shortfall is |p| - (p . m)/|p|; a sample is
@@ -79,6 +81,18 @@ def identified_axes(u: np.ndarray, opt: ExecutionOptions = ExecutionOptions()) -
     u = np.asarray(u, float)
     lim = np.asarray(opt.excite_min, float)
     return (u.std(axis=0) >= lim) & ((np.abs(u) >= lim).sum(axis=0) >= opt.min_samples)
+
+
+def input_condition(u: np.ndarray, axes: np.ndarray) -> float:
+    """Condition number of the standardised regressors [u_k for identified k, 1]: large (> ~30) when the log moves
+    two axes together (e.g. vx and wz always in the same proportion), so that their cross gains cannot be told
+    apart even though each axis is excited."""
+    idx = np.flatnonzero(axes)
+    if len(idx) == 0:
+        return 1.0
+    x = np.asarray(u, float)[:, idx]
+    x = (x - x.mean(axis=0)) / np.maximum(x.std(axis=0), 1e-12)
+    return float(np.linalg.cond(x)) if len(x) > len(idx) else float("inf")
 
 
 def least_squares(u: np.ndarray, v: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -208,8 +208,18 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
         notes.append("the robot was moving at the first command; the replay starts it at rest")
     scene = scene_for(data.odom.pose[:, :2])
     nominal = run_profile("nominal", data, RobotProfile(), opt.window_s, scene=scene)
-    # the log's own model, and the nominal model's response to the same commands
-    cal = calibrate_series(dataclasses.replace(data, scan=None), cal_opt)
+    # the log's own model (with a given profile only its delay is needed, so a log too weak to calibrate still
+    # replays), and the nominal model's response to the same commands
+    try:
+        cal = calibrate_series(dataclasses.replace(data, scan=None), cal_opt)
+        delay_s = cal.delay.xcorr_s
+    except UserError as err:
+        if execution is None:
+            raise
+        from .delay import estimate_delay
+        axes = [j for j in range(3) if np.ptp(data.cmd.u[:, j]) > 1e-9] or [0]
+        delay_s = estimate_delay(data.cmd.t, data.cmd.u, data.odom.t, data.odom.twist, axes, opt=cal_opt.delay).xcorr_s
+        notes.append(f"the log could not be calibrated ({err.message}); only its actuation delay was measured")
     sim_log = dataclasses.replace(data, scan=None, odom=OdomSeries("replay", nominal.t, nominal.t, nominal.pose,
                                                                    nominal.twist))
     cal0 = calibrate_series(sim_log, cal_opt)
@@ -218,7 +228,7 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     else:
         A, d = np.asarray(execution.A, float), np.asarray(execution.d, float)
         notes.append("execution model A, d from the given profile; actuation delay measured on this log")
-    prof = model_profile(A, d, cal.delay.xcorr_s, cal0.fit.A, cal0.fit.d, cal0.delay.xcorr_s)
+    prof = model_profile(A, d, delay_s, cal0.fit.A, cal0.fit.d, cal0.delay.xcorr_s)
     runs = {"nominal": nominal}
     runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene)
     if opt.fit:

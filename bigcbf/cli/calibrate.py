@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .argtypes import float_in
+from .argtypes import float_in, positive_float
 
 HELP = "calibrate tau95, the execution model (A, d, residual bound e_exec) and e_ZOH from a robot log"
 
@@ -19,7 +19,14 @@ def add_arguments(p):
     p.add_argument("--odom-topic", default=None, help="odometry topic (nav_msgs/Odometry; default: found by type)")
     p.add_argument("--scan-topic", default=None, help="laser scan topic for the perception latency (default: by type)")
     p.add_argument("--no-scan", action="store_true", help="ignore scans (tau95 = actuation delay only)")
-    p.add_argument("--coverage", type=float_in(0.5, 1.0, "a coverage"), default=0.95, help="stated coverage of the residual bound (0.95)")
+    p.add_argument("--scan-clock", choices=["auto", "stamps", "log"], default="auto",
+                   help="scan acquisition times: header stamps when on the log's clock (auto), always the header "
+                        "stamps, or always the log times")
+    p.add_argument("--cmd-timeout", type=positive_float, default=None, metavar="S",
+                   help="the robot's command timeout, if its firmware stops when commands stop (default: none, "
+                        "the last command is held)")
+    p.add_argument("--coverage", type=float_in(0.5, 1.0, "a coverage"), default=0.95,
+                   help="stated coverage of the residual bound (0.95)")
 
 
 def run(args) -> int:
@@ -27,8 +34,12 @@ def run(args) -> int:
 
     from twin.calibrate import CalibrationOptions, calibrate_series, read_log, summary_lines, write_profile
 
+    from ..errors import UserError
+    if args.no_scan and args.scan_topic is not None:
+        raise UserError("--scan-topic and --no-scan contradict each other: give one")
     opt = CalibrationOptions()
-    opt = replace(opt, residual=replace(opt.residual, coverage=args.coverage))
+    opt = replace(opt, residual=replace(opt.residual, coverage=args.coverage),
+                  delay=replace(opt.delay, scan_clock=args.scan_clock), max_command_age_s=args.cmd_timeout)
     data = read_log(args.log, args.cmd_topic, args.odom_topic, args.scan_topic, use_scan=not args.no_scan)
     cal = calibrate_series(data, opt)
     written = []

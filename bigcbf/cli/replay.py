@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from .argtypes import positive_float
+
 HELP = "replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted); errors, video"
 
 
@@ -16,7 +18,7 @@ def add_arguments(p):
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--fit", action="store_true",
                    help="also fit the model's latency, gains and floor friction to the log (slow: ~40 replays)")
-    p.add_argument("--window", type=float, default=5.0, metavar="S", help="pose-drift window in seconds (5)")
+    p.add_argument("--window", type=positive_float, default=5.0, metavar="S", help="pose-drift window in seconds (5)")
     p.add_argument("--cmd-topic", default=None, help="command topic (default: found by type)")
     p.add_argument("--odom-topic", default=None, help="odometry topic (default: found by type)")
     p.add_argument("--save-robot-profile", type=Path, default=None, metavar="PATH.toml",
@@ -39,8 +41,6 @@ def run(args) -> int:
     from ..errors import UserError
     from ..params.toml_io import save
 
-    if not args.window > 0:
-        raise UserError(f"expected a window > 0 s, got {args.window}", field="--window")
     for path, what in ((args.video, "video"), (args.save_robot_profile, "robot profile")):
         if path is not None and path.is_dir():
             raise UserError(f"{what} path is a directory", file=str(path))

@@ -24,8 +24,20 @@ def add_arguments(p):
 
 
 def load_params(path):
+    """The stack parameters of ``--profile`` (Table I without one). A calibrated profile whose translational axes
+    were not identified by the calibration gets a note on stderr: the behaviors command vx and vy, and for an
+    unidentified axis the profile holds the nominal model, not a measurement."""
+    import sys
+
     from ..params.stack import SIMULATION, load_stack_params
-    return SIMULATION if path is None else load_stack_params(path)
+    if path is None:
+        return SIMULATION
+    params = load_stack_params(path)
+    missing = [a for a, ok in zip(("vx", "vy", "wz"), params.uncertainty.execution.identified[:2]) if not ok]
+    if missing:
+        print(f"note: {path}: {', '.join(missing)} not identified by the calibration; its execution model and "
+              "residual bound are the nominal ones, not measured", file=sys.stderr)
+    return params
 
 
 def check_output(path: Path, what: str) -> None:

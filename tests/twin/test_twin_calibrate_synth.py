@@ -96,3 +96,36 @@ def test_logs_that_cannot_be_calibrated():
                                                            log.odom.pose, log.odom.twist))
     with pytest.raises(UserError, match="overlap"):
         calibrate_series(apart)
+
+
+def test_command_timeout_leaves_stale_samples_out():
+    """A robot that stops on a 0.3 s command timeout: during a 3 s gap in the commands the synthetic robot stands
+    still. Holding the last command through the gap pairs it with a stopped robot and biases the fit; with the
+    timeout given, those samples are left out and A is recovered."""
+    import dataclasses
+    from twin.calibrate import CalibrationOptions
+    data = _synthetic_log(seed=2)
+    c, o = data.cmd, data.odom
+    gap = (c.t > 50.0) & (c.t < 53.0)
+    stopped = (o.t > 50.0 + 0.1 + 0.3) & (o.t < 53.0 + 0.1)
+    v = o.twist.copy()
+    v[stopped] = 0.0
+    data = dataclasses.replace(data, cmd=dataclasses.replace(c, t=c.t[~gap], u=c.u[~gap]),
+                               odom=dataclasses.replace(o, twist=v))
+    held = calibrate_series(data)
+    assert any("gaps of up to 3" in w and "--cmd-timeout" in w for w in held.warnings)
+    cal = calibrate_series(data, CalibrationOptions(max_command_age_s=0.3))
+    assert cal.counts["stale"] > 100 and any("command timeout 0.3 s" in w for w in cal.warnings)
+    np.testing.assert_allclose(np.diag(cal.fit.A)[[0, 2]], np.diag(A)[[0, 2]], rtol=0.02)
+
+
+def test_axes_moving_together_are_flagged():
+    """vx and wz always commanded in the same proportion: both excited, their cross gains not separable."""
+    import dataclasses
+    data = _synthetic_log(seed=3)
+    u = data.cmd.u.copy()
+    u[:, 2] = 2.0 * u[:, 0]
+    data = dataclasses.replace(data, cmd=dataclasses.replace(data.cmd, u=u))
+    cal = calibrate_series(data)
+    assert any("move together" in w and "vx, wz" in w for w in cal.warnings)
+    assert not any("move together" in w for w in calibrate_series(_synthetic_log(seed=3)).warnings)

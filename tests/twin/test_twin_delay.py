@@ -125,6 +125,28 @@ def test_perception_latency_same_clock_and_other_clock():
     assert scan_clock(t_scan, t_scan + 0.003) == "header stamps"       # a few ms ahead: same clock (clamped)
     lat, _ = perception_latency([0.15], t_scan, t_scan + 0.003)
     np.testing.assert_allclose(lat, [0.05])
+    # stamps 0.5 s behind the log: no driver takes that long, another clock -> log times (it was counted before)
+    lat, src = perception_latency(t_cmd, t_scan, t_scan - 0.5)
+    assert src == "log times"
+    np.testing.assert_allclose(lat, [0.05, 0.05, 0.05])
+    # the user decides: forced stamps or forced log times
+    lat, src = perception_latency(t_cmd, t_scan, t_scan - 0.5, clock="stamps")
+    assert src == "header stamps"
+    np.testing.assert_allclose(lat, [0.55, 0.55, 0.55])
+    assert perception_latency(t_cmd, t_scan, t_scan - 0.01, clock="log")[1] == "log times"
+
+
+def test_edges_found_with_10_hz_odometry():
+    """The settled levels are averaged over at least 2.5 odometry periods: at 10 Hz (0.1 s apart) a 0.1 s window
+    held one sample and every edge was dropped, which silently turned tau95 into the dead time alone."""
+    rng = np.random.default_rng(3)
+    t_cmd, u = _random_steps(rng, 60)
+    t_odom = np.round(np.arange(0, 60, 0.1), 9)
+    v = _response(t_cmd, u, t_odom, dead_s=0.1, lag_s=0.1)
+    d, _, _ = edge_delays(t_cmd, u, t_odom, v, [0, 1, 2], DelayOptions())
+    assert len(d) > 50
+    # dead time 0.1 s + a first-order lag of 0.1 s: half-way after 0.1 + 0.1 ln 2 = 0.169 s (odometry every 0.1 s)
+    assert np.median(d) == pytest.approx(0.1 + 0.1 * np.log(2), abs=0.03)
 
 
 def test_estimate_delay_recovers_latency_and_jitter_distribution():

@@ -44,11 +44,16 @@ def test_speed_bins_start_at_zero_and_merge_small_bins():
     assert counts.min() >= 100
 
 
-def test_holdout_mask_every_fourth_block():
-    t = np.arange(0, 40.0001, 0.01)              # 40 blocks of 1 s: blocks 3, 7, ..., 39 held out (10 of 40)
-    held = holdout_mask(t, ResidualOptions(block_s=1.0))
+def test_holdout_mask_every_fourth_block_and_the_final_block():
+    # without the final block: 40 blocks of 1 s, blocks 3, 7, ..., 39 held out (10 of 40)
+    t = np.arange(0, 40.0001, 0.01)
+    held = holdout_mask(t, ResidualOptions(block_s=1.0, tail_fraction=0.0))
     assert held.mean() == pytest.approx(0.25, abs=0.001)
     assert not held[(t >= 0) & (t < 2.99)].any() and held[(t > 3.01) & (t < 3.99)].all()
+    # with it (the default 15 %): the last 6 s held out whole; the 34 s before in 34 blocks, every fourth held out
+    held = holdout_mask(t, ResidualOptions(block_s=1.0))
+    assert held[t > 34.01].all() and not held[(t > 32.01) & (t < 33.99)].any()
+    assert held.mean() == pytest.approx((6.0 + 8 * 1.0) / 40.0, abs=0.002)
 
 
 def test_held_out_coverage_matches_the_stated_one_on_exchangeable_data():
@@ -60,6 +65,7 @@ def test_held_out_coverage_matches_the_stated_one_on_exchangeable_data():
     b = calibrate_bound(t, s, r, ResidualOptions(coverage=0.95))
     assert b.speed_knots[0] == 0.0 and np.all(np.diff(b.speed_knots) > 0)
     assert b.coverage_heldout == pytest.approx(0.95, abs=0.01)
+    assert b.coverage_tail == pytest.approx(0.95, abs=0.015)          # the final block alone
     assert b.coverage_calibration >= 0.95
     assert b.bound_knots[-1] > b.bound_knots[0]        # command-dependent
 
