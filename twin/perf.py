@@ -32,7 +32,7 @@ def bench(quick: bool = False) -> dict:
             read_series(log, odom="/odom")
         out["logio_read_odom_msgs_per_s"] = round(n / (time.perf_counter() - t0), 1)
 
-        bag = Path(bigcbf.ROOT).parent / "shared/data/turtlebot3.bag"
+        bag = Path(bigcbf.ROOT) / "tests/data/turtlebot3.bag"
         if bag.is_file():
             t0 = time.perf_counter()
             data = read_log(bag)

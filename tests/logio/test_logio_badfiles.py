@@ -12,7 +12,7 @@ from bigcbf.errors import UserError
 from bigcbf.logio import CMD, ODOM, SCAN, LogWriter, find_topic, open_log, read_series
 from bigcbf.types import LaserScan, RobotState
 
-TURTLEBOT = Path(bigcbf.ROOT).parent / "shared/data/turtlebot3.bag"
+TURTLEBOT = Path(bigcbf.ROOT) / "tests/data/turtlebot3.bag"
 
 
 def _drive_log(path: Path, seconds=40.0, cmd_topic="/cmd_vel", odom_topic="/odom", extra_twist=None):

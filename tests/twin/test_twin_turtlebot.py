@@ -10,7 +10,7 @@ import bigcbf
 from bigcbf.cli import main
 from twin.calibrate import calibrate_log
 
-TURTLEBOT = Path(bigcbf.ROOT).parent / "shared/data/turtlebot3.bag"
+TURTLEBOT = Path(bigcbf.ROOT) / "tests/data/turtlebot3.bag"
 
 
 @pytest.fixture(scope="module")
