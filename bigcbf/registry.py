@@ -1,7 +1,7 @@
 """Name -> object registries (methods, scenarios, ...). A duplicate name is an error."""
 from __future__ import annotations
 
-from typing import Callable, Generic, Iterator, TypeVar
+from typing import Generic, Iterator, TypeVar
 
 from .errors import UserError
 

@@ -25,18 +25,15 @@ The rollouts are one batch over the blend grid (one loop over the 15 steps). Det
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..behaviors import behavior_command
-from ..planner import PlanInfo
 from ..uncertainty import nominal_velocity
-from .common import at_goal, clip_command, predict
-from .shield import one_step, rollout
+from .common import clip_command, predict
+from .shield import ShieldPlanner, one_step, rollout
 
 
 @dataclass(frozen=True)
@@ -50,25 +47,17 @@ def brake_policy(k: int, p: np.ndarray, obs_p: np.ndarray) -> np.ndarray:
     return np.zeros_like(p)
 
 
-class BackupCbfPlanner:
+class BackupCbfPlanner(ShieldPlanner):
     """Backup-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
 
     name = "backup-cbf"
 
     def __init__(self, params: StackParams, backup: BackupCbfParams = BackupCbfParams()):
-        self.params, self.backup = params, backup
-        self.last_h_min: np.ndarray | None = None
+        super().__init__(params)
+        self.backup = backup
 
-    def reset(self, seed: int) -> None:
-        self.last_h_min = None
-
-    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
-        t0 = time.perf_counter()
+    def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray, u_nom: np.ndarray):
         p = self.params
-        goal = np.asarray(goal, float).reshape(2)
-        if at_goal(state, goal, p):
-            return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
-        u_nom = behavior_command("GOAL", state, obstacles, goal, p)
         lam = np.asarray(self.backup.blends, float)
         U = (1.0 - lam)[:, None] * u_nom[None, :]                  # u_b = 0
         v0 = nominal_velocity(state.theta, U, p.uncertainty.execution)
@@ -82,5 +71,4 @@ class BackupCbfPlanner:
             mode = "NOMINAL" if lam[j] == 0.0 else ("BACKUP" if lam[j] == 1.0 else "BLEND")
         else:
             j, mode = len(lam) - 1, "BACKUP"
-        u = clip_command(U[j], p)
-        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, ro.p[j])
+        return clip_command(U[j], p), mode, ro.p[j]

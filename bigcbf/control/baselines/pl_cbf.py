@@ -26,18 +26,16 @@ Deterministic.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..behaviors import behavior_command, goal_basis, release_velocity
-from ..planner import PlanInfo
+from ..behaviors import goal_basis, release_velocity
 from ..uncertainty import nominal_velocity
-from .common import at_goal, body_from_world, clip_command, predict, world_velocity
-from .shield import one_step, rollout
+from .common import body_from_world, clip_command, predict, world_velocity
+from .shield import ShieldPlanner, one_step, rollout
 
 
 @dataclass(frozen=True)
@@ -81,27 +79,19 @@ class PolicyLibrary:
         return pi
 
 
-class PlCbfPlanner:
+class PlCbfPlanner(ShieldPlanner):
     """PL-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
 
     name = "pl-cbf"
 
     def __init__(self, params: StackParams, pl: PlCbfParams = PlCbfParams()):
-        self.params, self.pl = params, pl
-        self.last_h_min: np.ndarray | None = None
+        super().__init__(params)
+        self.pl = pl
 
-    def reset(self, seed: int) -> None:
-        self.last_h_min = None
-
-    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
-        t0 = time.perf_counter()
+    def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray, u_nom: np.ndarray):
         p = self.params
-        goal = np.asarray(goal, float).reshape(2)
-        if at_goal(state, goal, p):
-            return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
         lib = PolicyLibrary(p, self.pl, goal, obstacles)
         L = len(lib)
-        u_nom = behavior_command("GOAL", state, obstacles, goal, p)
         # 1) is the state after one step of the nominal certified by some library policy?
         p1 = one_step(state.p, state.theta, u_nom, p)
         v1 = nominal_velocity(state.theta, u_nom, p.uncertainty.execution)
@@ -109,8 +99,7 @@ class PlCbfPlanner:
                      predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2)
         if np.any(ro.h_min >= 0.0):
             self.last_h_min = ro.h_min
-            return (clip_command(u_nom, p),
-                    PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, ro.p[int(np.argmax(ro.h_min))]))
+            return clip_command(u_nom, p), "NOMINAL", ro.p[int(np.argmax(ro.h_min))]
         # 2) otherwise execute the best certified library policy from the current state
         ro = rollout(np.tile(state.p, (L, 1)), np.tile(world_velocity(state), (L, 1)), state.theta,
                      lib.policy(state.p), predict(obstacles, p), p, self.pl.a_max_mps2)
@@ -124,5 +113,4 @@ class PlCbfPlanner:
         else:
             j = int(np.argmax(ro.h_min))
             mode = lib.names[j] + "-UNCERTIFIED"
-        u = clip_command(body_from_world(state.theta, ro.v_cmd[j, 0]), p)
-        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, ro.p[j])
+        return clip_command(body_from_world(state.theta, ro.v_cmd[j, 0]), p), mode, ro.p[j]

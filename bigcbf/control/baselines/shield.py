@@ -15,14 +15,18 @@ rollout command) for every obstacle i and every state k = 0..K against the share
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from ...params.stack import StackParams
+from ...types import Obstacles, RobotState
+from ..behaviors import behavior_command
+from ..planner import PlanInfo
 from ..uncertainty import nominal_velocity
-from .common import Prediction, accel_limited, barrier_along, body_from_world
+from .common import Prediction, accel_limited, at_goal, barrier_along, body_from_world
 
 Policy = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
 
@@ -67,3 +71,32 @@ def one_step(p: np.ndarray, theta: float, u_body: np.ndarray, params: StackParam
     """The position after one control period T_C under u (Eq. 1, nominal): p + T_C R(theta)(A u + d)."""
     return np.asarray(p, float) + params.T_C_s * nominal_velocity(theta, np.asarray(u_body, float),
                                                                   params.uncertainty.execution)
+
+
+class ShieldPlanner:
+    """What the policy shields share: at every control tick the nominal input is the GOAL feedback law (Eq. 8
+    with b = GOAL, as for CBF-only) and ``shield`` decides what to send instead; zero inside the goal region.
+    Deterministic (``reset`` ignores the seed); ``last_h_min`` keeps the latest rollouts' worst barrier values."""
+
+    name = ""
+
+    def __init__(self, params: StackParams):
+        self.params = params
+        self.last_h_min: np.ndarray | None = None
+
+    def reset(self, seed: int) -> None:
+        self.last_h_min = None
+
+    def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray,
+               u_nom: np.ndarray) -> tuple[np.ndarray, str, np.ndarray | None]:
+        """(u_in, mode, rollout path shown in videos)."""
+        raise NotImplementedError
+
+    def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        goal = np.asarray(goal, float).reshape(2)
+        if at_goal(state, goal, self.params):
+            return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
+        u, mode, path = self.shield(state, obstacles, goal, behavior_command("GOAL", state, obstacles, goal,
+                                                                            self.params))
+        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, path)
