@@ -34,6 +34,15 @@ def _busiest_window(t: np.ndarray, u: np.ndarray, length: float) -> tuple[float,
     return a, a + length
 
 
+def _save(fig, path: Path) -> Path:
+    """Lay out, write (110 dpi) and close a figure; returns its path."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None = None,
                  cmd_u: np.ndarray | None = None) -> list[Path]:
     """Write the plots and calibration.json into ``out_dir`` (created). Returns the files written."""
@@ -68,10 +77,7 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     axs[0, 0].legend(loc="upper right", fontsize=8, ncol=2)
     axs[-1, 0].set_xlabel("time since the start of the log [s]")
     fig.suptitle("Command and response, delay-aligned")
-    fig.tight_layout()
-    files.append(out / "command_response.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(_save(fig, out / "command_response.png"))
 
     # 2. delays
     d = cal.delay
@@ -92,10 +98,7 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     axs[2].set_xlabel(f"perception latency [ms] ({d.perception_source})")
     axs[2].legend(fontsize=8)
     fig.suptitle("Delays")
-    fig.tight_layout()
-    files.append(out / "delay.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(_save(fig, out / "delay.png"))
 
     # 3. residuals against the bound
     b = cal.bound
@@ -117,10 +120,7 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     ax.set_title(f"Execution residual; e_exec(u) = {cal.residual_horizon_s:.3f} s x bound")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    files.append(out / "residuals.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(_save(fig, out / "residuals.png"))
 
     files.append(out / "calibration.json")
     files[-1].write_text(json.dumps(cal.to_json(), indent=2))
