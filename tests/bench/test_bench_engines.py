@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import bench_faults
+from bigcbf.bench import testing
 import pytest
 
 from bigcbf.bench import engines
@@ -35,18 +35,18 @@ def collect(fn, tasks, workers=2):
 
 def test_local_engine_crash_and_dead_worker(tmp_path, short_scenarios):
     tasks, _, _ = plan(config(tmp_path, short_scenarios))
-    rows = collect(bench_faults.fake_episode, tasks)
+    rows = collect(testing.fake_episode, tasks)
     assert len(rows) == 8 and all(r["status"] == "ok" for r in rows.values())
     assert rows[("corridor_meeting", "big-cbf", 1)]["metrics"]["control_steps"] == 101
     assert len({r["pid"] for r in rows.values()}) >= 1
 
-    rows = collect(bench_faults.raise_on_seed1, tasks)           # an exception in one episode
+    rows = collect(testing.raise_on_seed1, tasks)           # an exception in one episode
     bad = {k for k, r in rows.items() if r["status"] == "error"}
     assert bad == {(s, "cbf-only", 1) for s in ("corridor_meeting", "single_person_crossing")}
     assert all("RuntimeError: injected failure" in rows[k]["error"] for k in bad)
     assert len(rows) == 8
 
-    rows = collect(bench_faults.die_on_seed1, tasks)             # the worker process dies in one episode
+    rows = collect(testing.die_on_seed1, tasks)             # the worker process dies in one episode
     bad = {k for k, r in rows.items() if r["status"] == "error"}
     assert bad == {(s, "cbf-only", 1) for s in ("corridor_meeting", "single_person_crossing")}
     assert all("worker process died" in rows[k]["error"] for k in bad)
@@ -55,14 +55,14 @@ def test_local_engine_crash_and_dead_worker(tmp_path, short_scenarios):
 
 def test_runner_records_errors_and_retries_only_them(tmp_path, short_scenarios):
     lines = []
-    out = run_bench(config(tmp_path, short_scenarios), episode_fn=bench_faults.raise_on_seed1, progress=False,
+    out = run_bench(config(tmp_path, short_scenarios), episode_fn=testing.raise_on_seed1, progress=False,
                     log=lines.append)
     assert (out.total, out.ran, out.errors) == (8, 8, 2)
     assert "2 errors" in lines[-1]
     assert (tmp_path / "summary.md").read_text().count("injected failure") == 2
     with ResultStore(tmp_path / "results.sqlite") as st:
         first = {(r["scenario"], r["method"], r["seed"]): r for r in st.rows()}
-    out = run_bench(config(tmp_path, short_scenarios), episode_fn=bench_faults.fake_episode, progress=False,
+    out = run_bench(config(tmp_path, short_scenarios), episode_fn=testing.fake_episode, progress=False,
                     log=lines.append)
     assert (out.already_done, out.ran, out.errors) == (6, 2, 0)
     with ResultStore(tmp_path / "results.sqlite") as st:
@@ -73,14 +73,14 @@ def test_runner_records_errors_and_retries_only_them(tmp_path, short_scenarios):
         if first[k]["status"] == "ok":
             assert r["finished_utc"] == first[k]["finished_utc"]
     # a third run has nothing left to do; a changed parameter set gives new episodes, not mixed rows
-    out = run_bench(config(tmp_path, short_scenarios), episode_fn=bench_faults.fake_episode, progress=False,
+    out = run_bench(config(tmp_path, short_scenarios), episode_fn=testing.fake_episode, progress=False,
                     log=lines.append)
     assert (out.already_done, out.ran) == (8, 0)
     runs = out.summary["bench"]["runs"]                       # two invocations ran episodes: 8 + 2
     assert runs == 2 and out.summary["bench"]["episodes_per_min"] > 0
     with ResultStore(tmp_path / "results.sqlite") as st:
         assert [r["episodes_run"] for r in st.runs()] == [8, 2] and [r["errors"] for r in st.runs()] == [2, 0]
-    out = run_bench(config(tmp_path, short_scenarios, perception="truth"), episode_fn=bench_faults.fake_episode,
+    out = run_bench(config(tmp_path, short_scenarios, perception="truth"), episode_fn=testing.fake_episode,
                     progress=False, log=lines.append)
     assert (out.already_done, out.ran) == (0, 8)
 
@@ -96,4 +96,4 @@ def test_plan_rejects_user_mistakes(tmp_path, short_scenarios):
     f = tmp_path / "file"
     f.write_text("x")
     with pytest.raises(UserError, match="must be a directory"):
-        run_bench(config(f, short_scenarios), episode_fn=bench_faults.fake_episode, progress=False)
+        run_bench(config(f, short_scenarios), episode_fn=testing.fake_episode, progress=False)

@@ -1,7 +1,8 @@
-"""Episode functions for the bench tests (importable by spawned workers: pytest puts this folder on sys.path).
+"""Episode functions for testing an engine or a store (``run_bench(..., episode_fn=...)``), like numpy.testing.
 
 ``fake_episode`` returns made-up metrics computed from the task alone (no physics), so engine and store tests run
-in milliseconds; the others fail in chosen ways for one episode.
+in milliseconds; the others fail in chosen ways for one episode. They live in the package, not beside the tests,
+so that every worker (a spawned process, a Ray worker on another node) imports them by the same name.
 """
 from __future__ import annotations
 
