@@ -1,4 +1,4 @@
-# Two commands do everything on a fresh Debian machine (Python 3.10+, no GPU):
+# Two commands do everything on a fresh Debian machine (Python 3.11+, no GPU):
 #   make demo   set up .venv and the system libraries, then run the demo
 #   make test   the same set-up, then the test suite
 PYTHON ?= python3

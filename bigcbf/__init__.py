@@ -11,8 +11,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.1.0"
 
-#: Repository root (assets/ and scenarios/ live here; the project is installed editable).
-ROOT = Path(__file__).resolve().parent.parent
-ASSETS = ROOT / "assets"
-SCENARIOS = ROOT / "scenarios"
-RENDERS = ROOT / "renders"
+#: The package's own data (shipped in the wheel): the MJCF robot model and the scenario files. The repository's
+#: top-level ``assets`` and ``scenarios`` are symbolic links to these folders.
+PACKAGE = Path(__file__).resolve().parent
+ASSETS = PACKAGE / "assets"
+SCENARIOS = PACKAGE / "scenarios"
+#: The checkout's root when running from a source tree (tests, scripts); not meaningful in an installed wheel.
+ROOT = PACKAGE.parent
+#: Default folder for videos: ``renders/`` of the current directory.
+RENDERS = Path("renders")
