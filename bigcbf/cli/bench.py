@@ -7,7 +7,6 @@ from pathlib import Path
 HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite, resumable; "
         "write episodes.csv, summary.json/.md and figures")
 
-DEFAULT_SEEDS = 50
 
 
 def add_arguments(p):
@@ -15,11 +14,13 @@ def add_arguments(p):
                    help="output directory (created; rerunning with the same DIR resumes)")
     p.add_argument("--methods", nargs="+", default=None, metavar="M",
                    help="methods to compare (default: every registered method)")
+    p.add_argument("--suite", default="paper", metavar="NAME",
+                   help="the scenarios of a named suite (default paper: the nine of Table II)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
-                   help="scenario names or .toml files (default: the nine of scenarios/)")
+                   help="scenario names or .toml files instead of the suite's")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
-                       help=f"seeds 0..N-1, the same for every method (default {DEFAULT_SEEDS})")
+                       help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper)")
     seeds.add_argument("--seed-list", nargs="+", default=None, metavar="SEED", help="these seeds instead")
     p.add_argument("--workers", default=None, metavar="K",
                    help="parallel episodes (default: one per core; with --engine ray: the cluster's CPUs)")
@@ -53,11 +54,11 @@ def _int(value: str, option: str, minimum: int) -> int:
 def config_from_args(args):
     """A BenchConfig from parsed arguments; every mistake is a UserError (one line, exit 2)."""
     from ..bench.engines import ENGINES, ray_available
-    from ..bench.paper import METHOD_ORDER, SCENARIO_ORDER, ordered
+    from ..bench.paper import METHOD_ORDER, ordered
     from ..bench.runner import BenchConfig
+    from ..bench.suites import SUITES
     from ..control.methods import METHODS
     from ..errors import UserError
-    from ..scenario import scenario_files
     from .run import load_params
 
     if args.engine not in ENGINES:
@@ -68,19 +69,25 @@ def config_from_args(args):
         raise UserError("--engine ray needs Ray, which is not installed: pip install 'bigcbf[ray]'")
     if args.perception not in ("lidar", "truth"):
         raise UserError(f"--perception must be lidar or truth, got {args.perception!r}")
+    suite = SUITES.get(args.suite)
     if args.seed_list is not None:
         seeds = tuple(_int(s, "--seed-list", 0) for s in args.seed_list)
     else:
-        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(DEFAULT_SEEDS), "--seeds", 1)))
+        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(suite.default_seeds), "--seeds", 1)))
     workers = None if args.workers is None else _int(args.workers, "--workers", 1)
     if workers is None and args.engine == "local":
         workers = os.cpu_count() or 1
     methods = tuple(args.methods) if args.methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
     for m in methods:
         METHODS.get(m)
-    scenarios = tuple(args.scenarios) if args.scenarios else tuple(ordered(scenario_files(), SCENARIO_ORDER))
+    scenarios = (tuple(args.scenarios) if args.scenarios
+                 else tuple(str(e.scenario) for e in suite.entries(args.out)))
+    if args.profile is not None or suite.params is None:
+        params = load_params(args.profile)
+    else:
+        params = suite.params()
     return BenchConfig(out=args.out, methods=methods, scenarios=scenarios, seeds=seeds, workers=workers,
-                       engine=args.engine, ray_address=args.ray_address, params=load_params(args.profile),
+                       engine=args.engine, ray_address=args.ray_address, params=params,
                        perception=args.perception)
 
 

@@ -176,6 +176,7 @@ def test_resume_after_sigkill(short_scenarios, tmp_path, capsys):
     (["--engine", "spark"], "--engine must be one of local, ray"),
     (["--ray-address", "auto"], "--ray-address needs --engine ray"),
     (["--profile", "/nonexistent/profile.toml"], "/nonexistent/profile.toml"),
+    (["--suite", "nope"], "unknown suite 'nope'; known: paper"),
 ])
 def test_cli_errors_are_one_line(extra, message, tmp_path, capsys):
     seeds = [] if {"--seeds", "--seed-list"} & set(extra) else ["--seeds", "1"]
@@ -190,3 +191,17 @@ def test_cli_ray_engine_without_ray(monkeypatch, tmp_path, capsys):
     assert main(["bench", "--out", str(tmp_path / "o"), "--engine", "ray"]) == 2
     err = capsys.readouterr().err
     assert "needs Ray" in err and "pip install 'bigcbf[ray]'" in err and err.count("\n") == 1
+
+
+def test_paper_suite_is_the_nine_of_table_ii(tmp_path):
+    from bigcbf.bench.paper import SCENARIO_ORDER
+    from bigcbf.cli import build_parser
+    from bigcbf.cli.bench import config_from_args
+
+    args = build_parser().parse_args(["bench", "--out", str(tmp_path / "o")])
+    config = config_from_args(args)
+    assert config.scenarios == SCENARIO_ORDER and config.seeds == tuple(range(50))
+    args = build_parser().parse_args(["bench", "--out", str(tmp_path / "o"), "--suite", "paper", "--seeds", "3",
+                                      "--scenarios", "corridor_meeting"])
+    config = config_from_args(args)
+    assert config.scenarios == ("corridor_meeting",) and config.seeds == (0, 1, 2)

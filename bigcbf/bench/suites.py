@@ -1,0 +1,48 @@
+"""Benchmark suites: named sets of scenarios that ``bigcbf bench --suite NAME`` runs.
+
+A suite lists its scenarios (names of the shipped scenario files or paths to TOML files), how many seeds it runs
+by default, and optionally the stack parameters it is meant for (e.g. a hardware preset). Suites that generate
+their worlds write them as ordinary scenario TOML files into the bench's output directory, so every world can be
+inspected and rerun with ``bigcbf run FILE``. No code path of the stack knows which suite or scene it runs.
+
+Suites register in ``SUITES`` by name (a duplicate name is an error).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from ..registry import Registry
+
+
+@dataclass(frozen=True)
+class SuiteEntry:
+    """One scenario of a suite: a shipped scenario's name or a TOML path, and (generated suites) its split and
+    family, used to report dev and test splits and success per family separately."""
+
+    scenario: str
+    split: str = ""
+    family: str = ""
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    description: str
+    #: the suite's scenarios, given the bench's output directory (generated suites write their files there)
+    entries: Callable[[Path], list[SuiteEntry]]
+    default_seeds: int = 50
+    #: the stack parameters the suite is meant for (None: the default profile); ``--profile`` overrides it
+    params: Callable[[], object] | None = None
+
+
+SUITES: Registry[Suite] = Registry("suite")
+
+
+def _paper(out: Path) -> list[SuiteEntry]:
+    from .paper import SCENARIO_ORDER
+    return [SuiteEntry(name) for name in SCENARIO_ORDER]
+
+
+SUITES.register("paper", Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
