@@ -17,19 +17,22 @@ from typing import Callable
 import numpy as np
 
 from .control.cbf import CbfFilter
-from .control.methods import METHODS
+from .control.methods import make_planner
 from .control.metrics import cbf_energy
+from .control.planner import PlanInfo
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
 from .scenario import Scenario
 from .sim.lidar import LidarConfig
-from .sim.pedestrians import Pedestrians
+from .sim.pedestrians import Pedestrians, SocialForceParams
 from .sim.truth import GroundTruth
 from .sim.world import SimWorld
 from .types import Obstacles, RobotState
 
 PERCEPTION_MODES = ("lidar", "truth")
+#: the method name of an episode whose u_in comes from outside (``Episode(..., method=None)``, e.g. a Gymnasium agent)
+EXTERNAL = "external"
 #: true clearance and physical contact are checked after every block of SimWorld.BLOCK_STEPS physics steps
 #: (10 ms: at 2 m/s relative speed, 2 cm between samples; a contact lasts longer than that)
 
@@ -82,11 +85,25 @@ class StepRecord:
 
 
 class Episode:
-    """One scenario x method x seed. ``run()`` returns an EpisodeResult; observers see every control step."""
+    """One scenario x method x seed. ``run()`` returns an EpisodeResult; observers see every control step.
 
-    def __init__(self, scenario: Scenario, method: str, seed: int, params: StackParams = SIMULATION,
+    ``method``: a method name (``bigcbf.control.methods``: registered, entry point or ``package.module:Class``),
+    or None for an episode whose u_in comes from outside (``act(u_in)``). ``method_params``: the method's own
+    parameters (its ``params_type``; default its defaults). :meth:`from_config` takes them all from a RunConfig.
+    """
+
+    @classmethod
+    def from_config(cls, scenario: Scenario, method: str | None, seed: int, config, **kwargs) -> "Episode":
+        """An episode with the stack, perception, pedestrian and method parameters of a
+        :class:`bigcbf.config.RunConfig`; ``kwargs`` as for the constructor (perception, time_limit_s, ...)."""
+        return cls(scenario, method, seed, config.stack, perception_params=config.perception,
+                   pedestrian_params=config.pedestrians,
+                   method_params=None if method is None else config.method_params(method), **kwargs)
+
+    def __init__(self, scenario: Scenario, method: str | None, seed: int, params: StackParams = SIMULATION,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
-                 lidar: LidarConfig = LidarConfig(), time_limit_s: float | None = None):
+                 lidar: LidarConfig = LidarConfig(), time_limit_s: float | None = None,
+                 pedestrian_params: SocialForceParams = SocialForceParams(), method_params=None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
@@ -98,15 +115,17 @@ class Episode:
         self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
                                 [p.start_time_s for p in peds], [p.radius_m for p in peds],
                                 [p.loop for p in peds], [p.reactive for p in peds],
-                                robot_radius=params.uncertainty.r_robot_m)
+                                params=pedestrian_params, robot_radius=params.uncertainty.r_robot_m)
         m = self.world.model
         import mujoco
         self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")] for p in peds]
         self._ped_t, self._ped_next = 0.0, 0.0
         self._move_pedestrians(self.world)
         self.world.add_pre_step(self._move_pedestrians)
-        self.planner = METHODS.get(method)(params)
-        self.planner.reset(self.seed)
+        # method None: no planner, every act() gets its u_in from outside (EXTERNAL)
+        self.planner = None if method is None else make_planner(method, params, method_params)
+        if self.planner is not None:
+            self.planner.reset(self.seed)
         self.cbf = CbfFilter(params)
         self.perception = Perception(perception_params)
         self.goal = scenario.goal
@@ -136,80 +155,138 @@ class Episode:
             return self.truth.obstacles((ts.px, ts.py), self._ped_positions(), self.peds.v)
         return self.perception.update(scan, (odom.px, odom.py, odom.theta))
 
-    def run(self) -> EpisodeResult:
-        p, w = self.params, self.world
-        wall0 = time.perf_counter()
-        steps_per_control = int(round(p.T_C_s / w.dt))
-        steps_per_scan = int(round(1.0 / w.lidar.config.rate_hz / w.dt))
-        e_cbf, active, infeasible, n_ctrl, stopped = 0.0, 0, 0, 0, 0.0
-        planner_ms, cbf_ms, percep_ms = [], [], []
-        modes: list[tuple[float, str]] = []
-        min_clear = np.inf
-        collision = success = False
-        obstacles, scan, scan_t = Obstacles.empty(), None, 0.0
-        k = 0
-        limit_steps = int(round(self.time_limit_s / w.dt))
-        while k < limit_steps:
-            if k % steps_per_scan == 0:
-                scan = w.scan()
+    # --- the loop, one control period at a time ------------------------------------------------------------
+    #
+    #   begin()                      -> physics up to the first control tick (scans on the way), then observe it
+    #   act(u_in=None)               -> plan (or take u_in), filter, command; physics to the next control tick
+    #   done / result()              -> whether the episode ended (goal, collision, time limit); its metrics
+    #
+    # run() is begin() then act() until done. Stepping through act() gives exactly run()'s episode (same order of
+    # scans, estimates, commands and physics); the Gymnasium environment (bigcbf.gym_env) steps it with its
+    # agent's u_in instead of the planner's.
+
+    def begin(self) -> None:
+        """Start the episode: physics up to the first control tick, where :meth:`act` takes over."""
+        w = self.world
+        self._wall0 = time.perf_counter()
+        self._spc = int(round(self.params.T_C_s / w.dt))                      # physics steps per control tick
+        self._sps = int(round(1.0 / w.lidar.config.rate_hz / w.dt))           # physics steps per scan
+        self._limit = int(round(self.time_limit_s / w.dt))
+        self._k = 0
+        self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
+        self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
+        self._modes: list[tuple[float, str]] = []
+        self._min_clear = np.inf
+        self._collision = self._success = False
+        self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
+        self.state: RobotState | None = None       # the stack's state at the pending control tick
+        self.done = False
+        self._observe()
+
+    def _observe(self) -> None:
+        """From the current physics step: scans when due, then at a control tick the stack's state and the goal
+        check; physics in between. Stops at a control tick (pending for act) or when the episode ends."""
+        w = self.world
+        while not self.done:
+            k = self._k
+            if k >= self._limit:
+                self.done = True
+                return
+            if k % self._sps == 0 and self._scanned != k:
+                self._scanned = k
+                self._scan = w.scan()
                 t0 = time.perf_counter()
-                obstacles = self._estimate(scan, w.odom())
-                percep_ms.append(1e3 * (time.perf_counter() - t0))
-                scan_t = w.t
-            if k % steps_per_control == 0:
+                self._obstacles = self._estimate(self._scan, w.odom())
+                self._percep_ms.append(1e3 * (time.perf_counter() - t0))
+                self._scan_t = w.t
+            if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
-                if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= p.eps_g_m:
-                    success = True
-                    break
-                # estimates are up to one scan old: advance them to now with their velocity (Eq. (2))
-                age = w.t - scan_t
-                obs_now = obstacles if age <= 0 or len(obstacles) == 0 else Obstacles(
-                    obstacles.p + age * obstacles.v, obstacles.v, obstacles.cov, obstacles.r, obstacles.static,
-                    obstacles.ids)
-                u_in, pinfo = self.planner.plan(w.t, state, obs_now, self.goal)
-                u_safe, finfo = self.cbf.filter(state, obs_now, u_in)
-                w.command(u_safe)
-                if pinfo.planned:
-                    planner_ms.append(pinfo.planner_ms)
-                cbf_ms.append(finfo.solve_ms)
-                e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
-                active += bool(finfo.active)
-                infeasible += bool(finfo.infeasible)
-                n_ctrl += 1
-                if not modes or modes[-1][1] != pinfo.mode:
-                    modes.append((round(w.t, 3), pinfo.mode))
-                ts = w.true_state()
-                if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
-                    stopped += p.T_C_s
-                if self.observers:
-                    rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
-                                     bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D),
-                                     pinfo.path, scan)
-                    for obs in self.observers:
-                        obs(rec)
-            # physics up to the next scan or control tick, in blocks; clearance and contact after each block
-            nxt = min(steps_per_scan - k % steps_per_scan, steps_per_control - k % steps_per_control,
-                      limit_steps - k)
-            while nxt > 0 and not collision:
-                nb = min(nxt, w.BLOCK_STEPS)
-                w.step(nb)
-                k += nb
-                nxt -= nb
-                min_clear = min(min_clear, self.truth.clearance(w.data.qpos[0:2], self._ped_positions()))
-                collision = self.truth.in_contact(w.data)
-            if collision:
-                break
+                if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= self.params.eps_g_m:
+                    self._success = self.done = True
+                    return
+                self.state = state
+                return
+            self._physics()
+
+    def obstacles_now(self) -> Obstacles:
+        """The estimates at the pending control tick: up to one scan old, advanced to now with their velocity
+        (Eq. (2))."""
+        obstacles, age = self._obstacles, self.world.t - self._scan_t
+        if age <= 0 or len(obstacles) == 0:
+            return obstacles
+        return Obstacles(obstacles.p + age * obstacles.v, obstacles.v, obstacles.cov, obstacles.r, obstacles.static,
+                         obstacles.ids)
+
+    def act(self, u_in=None) -> StepRecord | None:
+        """One control period at the pending control tick: the planner's u_in (or the given one), the common CBF
+        filter, the command; then physics up to the next control tick. Returns what the step did."""
+        if self.done:
+            raise RuntimeError("the episode is over")
+        p, w, state = self.params, self.world, self.state
+        obs_now = self.obstacles_now()
+        if u_in is None:
+            u_in, pinfo = self.planner.plan(w.t, state, obs_now, self.goal)
+        else:
+            u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
+        u_safe, finfo = self.cbf.filter(state, obs_now, u_in)
+        w.command(u_safe)
+        if pinfo.planned:
+            self._planner_ms.append(pinfo.planner_ms)
+        self._cbf_ms.append(finfo.solve_ms)
+        self._e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
+        self._active += bool(finfo.active)
+        self._infeasible += bool(finfo.infeasible)
+        self._n_ctrl += 1
+        if not self._modes or self._modes[-1][1] != pinfo.mode:
+            self._modes.append((round(w.t, 3), pinfo.mode))
         ts = w.true_state()
+        if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
+            self._stopped += p.T_C_s
+        rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
+                         bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D), pinfo.path, self._scan)
+        for observer in self.observers:
+            observer(rec)
+        self._physics()
+        self._observe()
+        return rec
+
+    def _physics(self) -> None:
+        """Physics up to the next scan or control tick, in blocks; true clearance and contact after each block."""
+        w = self.world
+        k = self._k
+        nxt = min(self._sps - k % self._sps, self._spc - k % self._spc, self._limit - k)
+        while nxt > 0 and not self._collision:
+            nb = min(nxt, w.BLOCK_STEPS)
+            w.step(nb)
+            self._k += nb
+            nxt -= nb
+            self._min_clear = min(self._min_clear, self.truth.clearance(w.data.qpos[0:2], self._ped_positions()))
+            self._collision = self.truth.in_contact(w.data)
+        if self._collision:
+            self.done = True
+
+    def result(self) -> EpisodeResult:
+        """The episode's metrics so far (final once ``done``)."""
+        w, p = self.world, self.params
+        ts = w.true_state()
+        n = max(self._n_ctrl, 1)
         return EpisodeResult(
-            scenario=self.scenario.name, method=self.method, seed=self.seed, success=success,
-            collision=collision, timeout=not (success or collision), time_s=round(w.t, 4),
-            min_clearance_m=float(min_clear), e_cbf=e_cbf,
-            cbf_active_ratio=active / max(n_ctrl, 1), qp_infeasible_ratio=infeasible / max(n_ctrl, 1),
-            planner_p95_ms=_p95(planner_ms), cbf_p95_ms=_p95(cbf_ms), perception_p95_ms=_p95(percep_ms),
-            stopped_time_s=round(stopped, 4),
+            scenario=self.scenario.name, method=self.method or EXTERNAL, seed=self.seed, success=self._success,
+            collision=self._collision, timeout=self.done and not (self._success or self._collision),
+            time_s=round(w.t, 4), min_clearance_m=float(self._min_clear), e_cbf=self._e_cbf,
+            cbf_active_ratio=self._active / n, qp_infeasible_ratio=self._infeasible / n,
+            planner_p95_ms=_p95(self._planner_ms), cbf_p95_ms=_p95(self._cbf_ms),
+            perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
-            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - wall0, control_steps=n_ctrl,
-            mode_history=modes, perception=self.perception_mode, warnings=w.warnings())
+            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
+            mode_history=list(self._modes), perception=self.perception_mode, warnings=w.warnings())
+
+    def run(self) -> EpisodeResult:
+        """The whole episode: :meth:`begin`, then :meth:`act` until done."""
+        self.begin()
+        while not self.done:
+            self.act()
+        return self.result()
 
 
 def _p95(xs) -> float:
