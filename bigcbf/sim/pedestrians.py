@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..params.checks import check_ranges
+
 
 @dataclass(frozen=True)
 class SocialForceParams:
@@ -27,6 +29,10 @@ class SocialForceParams:
     anisotropy: float = 0.35       # lambda: weight of interactions from behind
     waypoint_tol_m: float = 0.15
     max_speed_factor: float = 1.3
+
+    def __post_init__(self):
+        check_ranges(self, positive=("tau_s", "B_m", "waypoint_tol_m", "max_speed_factor"),
+                     nonneg=("A_mps2", "A_robot_mps2"), unit=("anisotropy",))
 
 
 class Pedestrians:

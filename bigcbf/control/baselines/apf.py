@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
@@ -44,6 +45,12 @@ class ApfParams:
     rho0_m: float = 0.6               # influence distance beyond the inflated radius [m]
     rho_min_m: float = 0.02           # floor of rho in the gradient [m]
     lookahead_s: float = 0.0          # where the prediction places dynamic obstacles [s]
+
+    def __post_init__(self):
+        check_ranges(self, positive=("d_conic_m", "rho0_m", "rho_min_m"),
+                     nonneg=("k_att_per_s", "k_rep_m3_per_s", "lookahead_s"))
+        if self.rho_min_m >= self.rho0_m:
+            raise ValueError("rho_min_m must be < rho0_m")
 
 
 def attractive_velocity(p, goal, ap: ApfParams) -> np.ndarray:
@@ -70,6 +77,7 @@ class ApfPlanner:
     """APF (Khatib 1986) at every control tick; deterministic (``reset`` ignores the seed)."""
 
     name = "apf"
+    params_type = ApfParams
 
     def __init__(self, params: StackParams, apf: ApfParams = ApfParams()):
         self.params, self.apf = params, apf

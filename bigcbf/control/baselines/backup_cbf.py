@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..uncertainty import nominal_velocity
@@ -41,6 +42,12 @@ class BackupCbfParams:
     a_brake_mps2: float = 2.0                                  # braking deceleration of the backup [m/s^2]
     blends: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)    # lambda grid, increasing, from 0 to 1 [-]
 
+    def __post_init__(self):
+        check_ranges(self, positive=("a_brake_mps2",))
+        b = self.blends
+        if not b or b[0] != 0.0 or b[-1] != 1.0 or any(y <= x for x, y in zip(b, b[1:])):
+            raise ValueError("blends must increase from 0.0 to 1.0")
+
 
 def brake_policy(k: int, p: np.ndarray, obs_p: np.ndarray) -> np.ndarray:
     """pi_b: command zero velocity (B, 2)."""
@@ -51,6 +58,7 @@ class BackupCbfPlanner(ShieldPlanner):
     """Backup-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
 
     name = "backup-cbf"
+    params_type = BackupCbfParams
 
     def __init__(self, params: StackParams, backup: BackupCbfParams = BackupCbfParams()):
         super().__init__(params)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
@@ -53,6 +54,11 @@ class DwaParams:
     w_velocity: float = 0.1           # weight of speed [-]
     w_yaw: float = 0.1                # penalty on |wz| / wz_max [-]
     clearance_cap_m: float = 1.0      # clearance beyond this does not count [m]
+
+    def __post_init__(self):
+        check_ranges(self, positive=("acc_xy_mps2", "window_s", "clearance_cap_m"),
+                     nonneg=("acc_wz_radps2", "w_heading", "w_clearance", "w_velocity", "w_yaw"),
+                     min_int={"n_xy": 1, "n_wz": 1})
 
 
 def window_samples(state: RobotState, params: StackParams, dp: DwaParams) -> np.ndarray:
@@ -106,6 +112,7 @@ class DwaPlanner:
     """DWA (Fox et al. 1997), holonomic, at every control tick; deterministic."""
 
     name = "dwa"
+    params_type = DwaParams
 
     def __init__(self, params: StackParams, dwa: DwaParams = DwaParams()):
         self.params, self.dwa = params, dwa

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
@@ -57,6 +58,13 @@ class MppiParams:
     w_clear: float = 2.0              # running clearance cost [1/s]
     l_clear_m: float = 0.15           # clearance cost length scale [m]
     w_smooth: float = 0.05            # smoothness weight [s^2/m^2]
+
+    def __post_init__(self):
+        check_ranges(self, positive=("sigma_mps", "gamma", "ess_fraction", "l_clear_m"),
+                     nonneg=("w_goal", "w_term", "w_coll", "w_clear", "w_smooth"),
+                     min_int={"samples": 2, "iterations": 1})
+        if self.ess_fraction > 1:
+            raise ValueError(f"ess_fraction must be in (0, 1], got {self.ess_fraction}")
 
 
 def sample_sequences(V: np.ndarray, rng: np.random.Generator, v_max: float, mp: MppiParams
@@ -104,6 +112,7 @@ class MppiPlanner:
     """MPPI (Williams et al. 2017) at 2 Hz; follows its sequence between updates; deterministic per seed."""
 
     name = "mppi"
+    params_type = MppiParams
 
     def __init__(self, params: StackParams, mppi: MppiParams = MppiParams()):
         self.params, self.mppi = params, mppi

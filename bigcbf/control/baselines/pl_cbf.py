@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import goal_basis, release_velocity
@@ -44,6 +45,9 @@ class PlCbfParams:
     v_dir_mps: float = 0.5         # speed of a directional policy [m/s]
     t_move_s: float = 1.0          # how long a directional policy moves before stopping [s]
     a_max_mps2: float = 2.0        # acceleration limit of the rollouts [m/s^2]
+
+    def __post_init__(self):
+        check_ranges(self, positive=("v_dir_mps", "t_move_s", "a_max_mps2"), min_int={"n_dir": 1})
 
 
 class PolicyLibrary:
@@ -83,6 +87,7 @@ class PlCbfPlanner(ShieldPlanner):
     """PL-CBF shield at every control tick (deterministic; ``reset`` ignores the seed)."""
 
     name = "pl-cbf"
+    params_type = PlCbfParams
 
     def __init__(self, params: StackParams, pl: PlCbfParams = PlCbfParams()):
         super().__init__(params)
