@@ -34,7 +34,7 @@ class BenchConfig:
     workers: int | None = None            # local: default os.cpu_count(); ray: default all CPUs of the cluster
     engine: str = "local"
     ray_address: str | None = None
-    params: object = None                 # StackParams (default SIMULATION, Table I)
+    config: object = None                 # RunConfig (bigcbf.config; default: Table I and every default)
     perception: str = "lidar"
 
 
@@ -58,9 +58,9 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     Checks everything a user can get wrong before any episode starts: unknown method or scenario, a scenario file
     that does not load for one of the seeds, two files with the same scenario name, seeds, workers.
     """
-    from ..control.methods import METHODS
+    from ..config import RunConfig
+    from ..control.methods import resolve_method
     from ..episode import PERCEPTION_MODES
-    from ..params.stack import SIMULATION
     from ..scenario import load_scenario, resolve_path
 
     if not config.methods:
@@ -82,8 +82,8 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     if config.perception not in PERCEPTION_MODES:
         raise UserError(f"unknown perception {config.perception!r}; known: {', '.join(PERCEPTION_MODES)}")
     for m in config.methods:
-        METHODS.get(m)
-    ptoml = params_toml(config.params if config.params is not None else SIMULATION)
+        resolve_method(m)
+    ptoml = params_toml(config.config if config.config is not None else RunConfig())
     phash = params_key(ptoml, config.perception)
 
     scen: dict[str, tuple[str, str]] = {}          # name -> (sha, text)

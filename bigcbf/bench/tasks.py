@@ -1,12 +1,14 @@
 """What a bench worker runs: one episode from plain, picklable arguments, returned as a result row.
 
-A task carries the scenario file's *text* and the parameters' TOML *text* (not paths or objects), so that it
-pickles for the process pool and for Ray, and a worker on another machine needs only the installed package.
-The worker never touches the database: it returns a row (a plain dict) and the parent writes it.
+A task carries the scenario file's *text* and the run configuration's TOML *text* (not paths or objects), so
+that it pickles for the process pool and for Ray, and a worker on another machine needs only the installed package
+(and, for a user's method given as ``package.module:Class``, that module importable by the same name). The worker
+never touches the database: it returns a row (a plain dict) and the parent writes it.
 
 Keys: an episode is identified by (scenario, method, seed, params_hash, scenario_sha). ``params_hash`` covers
-the StackParams and the perception mode, ``scenario_sha`` the scenario file's content, so changing either gives
-new rows instead of mixing results of different settings.
+the whole run configuration (:mod:`bigcbf.config`: the stack, perception, pedestrian and every method's
+parameters, defaults filled in) and the perception mode, ``scenario_sha`` the scenario file's content, so changing
+any of them gives new rows instead of mixing results of different settings.
 
 This module imports nothing heavy at import time (the spawned workers import it first and set their threading
 environment before numpy is loaded).
@@ -25,7 +27,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 #: Bump when the meaning of a row changes (part of params_hash, so old rows are not mixed with new ones).
-HASH_VERSION = "bigcbf-bench-1"
+#: 2: the hashed text is the whole run configuration, no longer the stack parameters alone.
+HASH_VERSION = "bigcbf-bench-2"
 
 
 @dataclass(frozen=True)
@@ -37,7 +40,7 @@ class EpisodeTask:
     method: str
     seed: int
     params_hash: str         # params_key(params_toml, perception)
-    params_toml: str         # StackParams as TOML
+    params_toml: str         # the RunConfig as TOML (bigcbf.config.config_toml)
     perception: str = "lidar"
 
     @property
@@ -45,16 +48,20 @@ class EpisodeTask:
         return (self.scenario, self.method, self.seed, self.params_hash, self.scenario_sha)
 
 
-def params_toml(params) -> str:
-    """The TOML text of a StackParams (every key; deterministic: dataclass field order)."""
-    import tomli_w
+def params_toml(config) -> str:
+    """The TOML text of a run configuration (a RunConfig, or StackParams meaning the default configuration with
+    these stack parameters): every table and key, deterministic (:func:`bigcbf.config.config_toml`)."""
+    from ..config import RunConfig, config_toml
+    from ..params.stack import StackParams
 
-    from ..params.toml_io import to_dict
-    return tomli_w.dumps(to_dict(params))
+    if isinstance(config, StackParams):
+        config = RunConfig(stack=config)
+    return config_toml(config)
 
 
 def params_key(toml_text: str, perception: str) -> str:
-    """Stable hash of the parameters and the perception mode: sha256 over a versioned, canonical text (hex, 16)."""
+    """Stable hash of the run configuration and the perception mode: sha256 over a versioned, canonical text
+    (hex, 16)."""
     h = hashlib.sha256()
     h.update(f"{HASH_VERSION}\nperception = {perception!r}\n".encode())
     h.update(toml_text.encode())
@@ -71,16 +78,14 @@ def text_sha(text: str) -> str:
 _PARAMS_CACHE: dict[str, Any] = {}
 
 
-def _params(task: EpisodeTask):
-    p = _PARAMS_CACHE.get(task.params_hash)
-    if p is None:
-        import tomllib
-
-        from ..params.stack import StackParams
-        from ..params.toml_io import from_dict
-        p = from_dict(StackParams, tomllib.loads(task.params_toml), file=f"<params {task.params_hash}>")
-        _PARAMS_CACHE[task.params_hash] = p
-    return p
+def _config(task: EpisodeTask):
+    """The task's RunConfig (parsed once per worker and configuration)."""
+    c = _PARAMS_CACHE.get(task.params_hash)
+    if c is None:
+        from ..config import config_from_toml
+        c = config_from_toml(task.params_toml, file=f"<run config {task.params_hash}>")
+        _PARAMS_CACHE[task.params_hash] = c
+    return c
 
 
 def _scenario(task: EpisodeTask):
@@ -108,10 +113,11 @@ def _json_safe(metrics: dict) -> dict:
 
 
 def run_episode(task: EpisodeTask) -> dict:
-    """Run one episode (Episode(...).run().metrics()) and return its metrics as a JSON-safe dict."""
+    """Run one episode (Episode.from_config(...).run().metrics()) and return its metrics as a JSON-safe dict."""
     from ..episode import Episode
 
-    result = Episode(_scenario(task), task.method, task.seed, _params(task), perception=task.perception).run()
+    result = Episode.from_config(_scenario(task), task.method, task.seed, _config(task),
+                                 perception=task.perception).run()
     return _json_safe(result.metrics())
 
 

@@ -1,0 +1,133 @@
+"""One typed configuration of a run: the stack, the perception, the pedestrians and each method's own parameters.
+
+``bigcbf run/bench --config RUN.toml`` reads it; every table and key is optional (missing ones keep their
+defaults, or the ``base`` given to :func:`load_run_config`)::
+
+    [stack]                 # StackParams: Table I (bigcbf/params/stack.py), BIG-CBF's and the filter's parameters
+    alpha_per_s = 1.5
+    [stack.uncertainty]
+    kappa_img = 1.0
+
+    [perception]            # PerceptionParams (bigcbf/params/perception.py): clustering, tracking
+    gate_chi2 = 9.21
+
+    [pedestrians]           # SocialForceParams (bigcbf/sim/pedestrians.py): the walkers' social-force model
+    A_robot_mps2 = 1.0
+
+    [methods.dwa]           # a method's own parameters (its params_type): apf, backup-cbf, dwa, mppi, pl-cbf,
+    n_xy = 9                # or a user method with a params_type, e.g. [methods."my_pkg.planners:MyPlanner"]
+
+BIG-CBF, BIG-CBF-NoShared and CBF-only have no table of their own: their parameters are the stack's. Unknown
+tables and keys, values of the wrong type or out of range are a UserError naming the file and the field
+(``methods.dwa.n_xy``). The LiDAR and the robot profile are not part of this file (the scenario file holds the
+robot profile).
+
+The bench hashes the whole configuration (:func:`config_toml`: every table with every key, defaults filled in)
+into each episode's key, so two files that mean the same thing give the same key, and changing any parameter
+gives new rows.
+"""
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .control.methods import METHODS, method_params_type
+from .errors import UserError
+from .params.perception import PerceptionParams
+from .params.stack import SIMULATION, StackParams
+from .params.toml_io import from_dict, load_toml, to_dict
+from .sim.pedestrians import SocialForceParams
+
+TABLES = ("stack", "perception", "pedestrians", "methods")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything of a run that is not the scenario, the method's name, the seed or the LiDAR."""
+
+    stack: StackParams = SIMULATION
+    perception: PerceptionParams = PerceptionParams()
+    pedestrians: SocialForceParams = SocialForceParams()
+    #: method name -> its parameters (an instance of the method's ``params_type``); methods not listed use
+    #: their defaults
+    methods: dict[str, Any] = field(default_factory=dict)
+
+    def method_params(self, method: str) -> Any:
+        """The parameters of ``method`` (None for a method without a ``params_type``)."""
+        ptype = method_params_type(method)
+        if ptype is None:
+            return None
+        return self.methods.get(method, ptype())
+
+    def replace(self, **changes) -> "RunConfig":
+        return dataclasses.replace(self, **changes)
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
+def run_config_from_dict(data: dict, *, file: str | None = None, base: RunConfig | None = None) -> RunConfig:
+    """A RunConfig from a TOML document (``base``: where missing keys come from; default the defaults)."""
+    base = base or RunConfig()
+    for key, value in data.items():
+        if key not in TABLES:
+            raise UserError(f"unknown table (known: {', '.join(TABLES)})", file=file, field=key)
+        if not isinstance(value, dict):
+            raise UserError(f"expected a table, got {value!r}", file=file, field=key)
+    parts: dict[str, Any] = {}
+    for key, cls in (("stack", StackParams), ("perception", PerceptionParams), ("pedestrians", SocialForceParams)):
+        if key in data:
+            parts[key] = from_dict(cls, _merge(to_dict(getattr(base, key)), data[key]), file=file, prefix=key)
+    methods = dict(base.methods)
+    for name, table in data.get("methods", {}).items():
+        where = f"methods.{name}"
+        if not isinstance(table, dict):
+            raise UserError(f"expected a table, got {table!r}", file=file, field=where)
+        try:
+            ptype = method_params_type(name)
+        except UserError as err:
+            raise UserError(err.message, file=file, field=where) from None
+        if ptype is None:
+            raise UserError(f"method {name!r} has no parameters of its own (BIG-CBF's are in [stack])",
+                            file=file, field=where)
+        start = to_dict(methods[name]) if name in methods else {}
+        methods[name] = from_dict(ptype, _merge(start, table), file=file, prefix=where)
+    return RunConfig(stack=parts.get("stack", base.stack), perception=parts.get("perception", base.perception),
+                     pedestrians=parts.get("pedestrians", base.pedestrians), methods=methods)
+
+
+def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfig:
+    """Read a run configuration TOML (format in the module docstring); errors name the file and the field."""
+    return run_config_from_dict(load_toml(path), file=str(path), base=base)
+
+
+def config_dict(config: RunConfig) -> dict:
+    """The whole configuration as a TOML document: every table, every key, and a table for every registered
+    method with parameters of its own (defaults filled in), plus every other method the configuration names."""
+    methods = {}
+    for name in METHODS.names():
+        ptype = method_params_type(name)
+        if ptype is not None:
+            methods[name] = to_dict(config.methods.get(name, ptype()))
+    for name, params in config.methods.items():
+        methods[name] = to_dict(params)
+    return {"stack": to_dict(config.stack), "perception": to_dict(config.perception),
+            "pedestrians": to_dict(config.pedestrians), "methods": dict(sorted(methods.items()))}
+
+
+def config_toml(config: RunConfig) -> str:
+    """:func:`config_dict` as TOML text (deterministic: dataclass field order, methods sorted by name)."""
+    import tomli_w
+    return tomli_w.dumps(config_dict(config))
+
+
+def config_from_toml(text: str, *, file: str = "<run config>") -> RunConfig:
+    """Parse :func:`config_toml`'s text back (what a bench worker does with its task)."""
+    return run_config_from_dict(tomllib.loads(text), file=file)
