@@ -1,7 +1,13 @@
 """bigcbf: BIG-CBF navigation for a Mecanum robot in MuJoCo, with a digital twin.
 
-Layers (a lower layer never imports a higher one; see ../shared/DESIGN.md):
-cli > bench > episode > sim > {perception, control} > {params, types}.
+Layers (a lower layer never imports a higher one; see docs/architecture.md):
+cli > api > bench > episode > sim > {perception, control} > {params, types}.
+
+The public Python API (:mod:`bigcbf.api`) is available from the package itself, loaded on first use so that
+``import bigcbf.control`` on a robot does not pull in the simulator::
+
+    import bigcbf
+    result = bigcbf.run_episode("required_sidestepping", "big-cbf", seed=0)
 """
 import os
 from pathlib import Path
@@ -16,7 +22,23 @@ __version__ = "0.1.0"
 PACKAGE = Path(__file__).resolve().parent
 ASSETS = PACKAGE / "assets"
 SCENARIOS = PACKAGE / "scenarios"
-#: The checkout's root when running from a source tree (tests, scripts); not meaningful in an installed wheel.
-ROOT = PACKAGE.parent
 #: Default folder for videos: ``renders/`` of the current directory.
 RENDERS = Path("renders")
+
+#: name -> module of the public API, imported on first access (PEP 562)
+_API = {"run_episode": "api", "run_bench": "api", "bench_config": "api", "load_config": "api",
+        "load_scenario": "api", "scenarios": "api", "methods": "api", "RunConfig": "config",
+        "load_run_config": "config", "EpisodeResult": "episode", "Episode": "episode", "StepRecord": "episode",
+        "BenchOutcome": "bench.runner", "UserError": "errors"}
+
+
+def __getattr__(name: str):
+    mod = _API.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'bigcbf' has no attribute {name!r}")
+    import importlib
+    return getattr(importlib.import_module(f"{__name__}.{mod}"), name)
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_API))

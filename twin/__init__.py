@@ -7,4 +7,30 @@ which loads it lazily inside ``bigcbf record``, ``bigcbf calibrate`` and ``bigcb
 Equation numbers follow the project's numbering (see ``bigcbf/control/__init__.py``): Eq. (1) the execution model
 v = A u + d + r [eq:execution]; Eq. (15) the uncertainty radius m_i with tau95, e_exec(u) and e_ZOH
 [eq:uncertainty_margin].
+
+The public Python API (loaded on first use; ``import twin.calibrate`` alone never imports MuJoCo)::
+
+    import twin
+    cal = twin.calibrate_log("drive.mcap")             # -> twin.Calibration (tau95, A, d, e_exec, e_ZOH, ...)
+    twin.write_profile(cal, "calibrated.toml")         # the uncertainty profile for bigcbf run --profile
+    rep = twin.replay_log("drive.mcap", "calibrated.toml")   # -> twin.ReplayResult (per-model RMSE and drift)
+    twin.record_calibration(bigcbf.params.RobotProfile(latency_s=0.08), "drive.mcap", duration_s=60.0)
 """
+
+#: name -> module of the public API, imported on first access (PEP 562)
+_API = {"calibrate_log": "calibrate", "calibrate_series": "calibrate", "read_log": "calibrate",
+        "write_profile": "calibrate", "Calibration": "calibrate", "CalibrationOptions": "calibrate",
+        "replay_log": "replay", "ReplayResult": "replay", "ReplayOptions": "replay",
+        "record_calibration": "record"}
+
+
+def __getattr__(name: str):
+    mod = _API.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'twin' has no attribute {name!r}")
+    import importlib
+    return getattr(importlib.import_module(f"{__name__}.{mod}"), name)
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_API))

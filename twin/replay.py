@@ -310,3 +310,23 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
         state["w"].close()
         if "r" in state:
             state["r"].close()
+
+
+def replay_log(path: str | Path, profile: str | Path | ExecutionModel | None = None, *,
+               opt: ReplayOptions = ReplayOptions(), video: str | Path | None = None, cmd_topic: str | None = None,
+               odom_topic: str | None = None) -> ReplayResult:
+    """Read a log and :func:`replay` it (``bigcbf replay LOG`` in Python). ``profile``: a calibrated uncertainty
+    profile TOML (its ``[uncertainty.execution]`` A, d) or an ExecutionModel; None: calibrate the log itself."""
+    from bigcbf.params.stack import load_stack_params
+    from bigcbf.params.toml_io import load_toml
+
+    from .calibrate import read_log
+
+    execution = profile
+    if profile is not None and not isinstance(profile, ExecutionModel):
+        if "execution" not in load_toml(profile).get("uncertainty", {}):
+            raise UserError("has no [uncertainty.execution] table (A, d): not a calibrated profile",
+                            file=str(profile), field="uncertainty.execution")
+        execution = load_stack_params(profile).uncertainty.execution
+    data = read_log(path, cmd_topic, odom_topic, use_scan=False)
+    return replay(data, execution, opt, video=video)

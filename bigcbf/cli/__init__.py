@@ -13,11 +13,14 @@ import sys
 from ..errors import UserError
 
 #: Subcommands, in the order ``bigcbf --help`` lists them.
-COMMANDS = ["scenarios", "run", "demo", "perf", "record", "calibrate", "replay", "bench"]
+COMMANDS = ["scenarios", "methods", "run", "demo", "perf", "record", "calibrate", "replay", "bench"]
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+
     parser = argparse.ArgumentParser(prog="bigcbf", description="BIG-CBF navigation in MuJoCo, with a digital twin.")
+    parser.add_argument("--version", action="version", version=f"bigcbf {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:

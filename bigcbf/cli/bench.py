@@ -1,7 +1,6 @@
 """bigcbf bench: the paper's benchmark (methods x scenarios x seeds), resumable, on local cores or Ray."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite, resumable; "
@@ -13,7 +12,8 @@ def add_arguments(p):
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="output directory (created; rerunning with the same DIR resumes)")
     p.add_argument("--methods", nargs="+", default=None, metavar="M",
-                   help="methods to compare (default: every registered method)")
+                   help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
+                        "every worker; default: every registered method)")
     p.add_argument("--suite", default="paper", metavar="NAME",
                    help="the scenarios of a named suite (default paper: the nine of Table II)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
@@ -28,8 +28,12 @@ def add_arguments(p):
                    help="local process pool (default) or Ray tasks (pip install 'bigcbf[ray]')")
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray instance")
+    p.add_argument("--config", type=Path, default=None, metavar="RUN.toml",
+                   help="run configuration ([stack], [perception], [pedestrians], [methods.NAME]); the whole "
+                        "configuration is part of the episode key")
     p.add_argument("--profile", type=Path, default=None,
-                   help="stack parameters / uncertainty profile TOML (default: Table I); part of the episode key")
+                   help="stack parameters / uncertainty profile TOML over the configuration's [stack] (default: "
+                        "Table I, or the suite's); part of the episode key")
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",
@@ -52,43 +56,22 @@ def _int(value: str, option: str, minimum: int) -> int:
 
 
 def config_from_args(args):
-    """A BenchConfig from parsed arguments; every mistake is a UserError (one line, exit 2)."""
-    from ..bench.engines import ENGINES, ray_available
-    from ..bench.paper import METHOD_ORDER, ordered
-    from ..bench.runner import BenchConfig
+    """A BenchConfig from parsed arguments (through :func:`bigcbf.api.bench_config`); every mistake is a UserError
+    (one line, exit 2)."""
+    from ..api import bench_config
     from ..bench.suites import SUITES
-    from ..control.methods import METHODS
-    from ..errors import UserError
-    from .run import load_params
+    from .run import stderr_note
 
-    if args.engine not in ENGINES:
-        raise UserError(f"--engine must be one of {', '.join(ENGINES)}, got {args.engine!r}")
-    if args.ray_address is not None and args.engine != "ray":
-        raise UserError("--ray-address needs --engine ray")
-    if args.engine == "ray" and not ray_available():
-        raise UserError("--engine ray needs Ray, which is not installed: pip install 'bigcbf[ray]'")
-    if args.perception not in ("lidar", "truth"):
-        raise UserError(f"--perception must be lidar or truth, got {args.perception!r}")
-    suite = SUITES.get(args.suite)
     if args.seed_list is not None:
         seeds = tuple(_int(s, "--seed-list", 0) for s in args.seed_list)
+    elif args.seeds is not None:
+        seeds = _int(args.seeds, "--seeds", 1)
     else:
-        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(suite.default_seeds), "--seeds", 1)))
+        seeds = SUITES.get(args.suite).default_seeds
     workers = None if args.workers is None else _int(args.workers, "--workers", 1)
-    if workers is None and args.engine == "local":
-        workers = os.cpu_count() or 1
-    methods = tuple(args.methods) if args.methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
-    for m in methods:
-        METHODS.get(m)
-    scenarios = (tuple(args.scenarios) if args.scenarios
-                 else tuple(str(e.scenario) for e in suite.entries(args.out)))
-    if args.profile is not None or suite.params is None:
-        params = load_params(args.profile)
-    else:
-        params = suite.params()
-    return BenchConfig(out=args.out, methods=methods, scenarios=scenarios, seeds=seeds, workers=workers,
-                       engine=args.engine, ray_address=args.ray_address, params=params,
-                       perception=args.perception)
+    return bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
+                        workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
+                        profile=args.profile, perception=args.perception, notes=stderr_note)
 
 
 def run(args) -> int:

@@ -25,18 +25,6 @@ def add_arguments(p):
                    help="write the calibrated (or fitted) simulator robot profile (for bigcbf record calibration)")
 
 
-def _execution(path: Path):
-    from ..errors import UserError
-    from ..params.stack import load_stack_params
-    from ..params.toml_io import load_toml
-
-    raw = load_toml(path)
-    if "execution" not in raw.get("uncertainty", {}):
-        raise UserError("has no [uncertainty.execution] table (A, d): not a calibrated profile", file=str(path),
-                        field="uncertainty.execution")
-    return load_stack_params(path).uncertainty.execution
-
-
 def run(args) -> int:
     from ..errors import UserError
     from ..params.toml_io import save
@@ -44,12 +32,10 @@ def run(args) -> int:
     for path, what in ((args.video, "video"), (args.save_robot_profile, "robot profile")):
         if path is not None and path.is_dir():
             raise UserError(f"{what} path is a directory", file=str(path))
-    execution = _execution(args.profile) if args.profile is not None else None
-    from twin.calibrate import read_log
-    from twin.replay import ReplayOptions, replay
+    from twin.replay import ReplayOptions, replay_log
 
-    data = read_log(args.log, args.cmd_topic, args.odom_topic, use_scan=False)
-    res = replay(data, execution, ReplayOptions(window_s=args.window, fit=args.fit), video=args.video)
+    res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit), video=args.video,
+                     cmd_topic=args.cmd_topic, odom_topic=args.odom_topic)
     best = res.runs.get("fitted", res.runs["calibrated"])
     if args.save_robot_profile is not None:
         save(best.profile, args.save_robot_profile,

@@ -11,10 +11,15 @@ HELP = "run one episode (scenario name or .toml file, method, seed); print its m
 
 def add_arguments(p):
     p.add_argument("scenario", metavar="SCENARIO_OR_FILE", help="a name from 'bigcbf scenarios' or a path to a .toml")
-    p.add_argument("--method", default="big-cbf", help="planner (default big-cbf); see 'bigcbf methods'")
+    p.add_argument("--method", default="big-cbf", metavar="M",
+                   help="planner (default big-cbf): a name from 'bigcbf methods' or package.module:Class")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
+    p.add_argument("--config", type=Path, default=None, metavar="RUN.toml",
+                   help="run configuration: [stack], [perception], [pedestrians], [methods.NAME] tables "
+                        "(docs/extending.md; default: every default)")
     p.add_argument("--profile", type=Path, default=None,
-                   help="stack parameters / calibrated uncertainty profile TOML (default: Table I)")
+                   help="stack parameters / calibrated uncertainty profile TOML over the configuration's [stack] "
+                        "(default: Table I)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
     p.add_argument("--video", type=Path, default=None, help="write an H.264 MP4 of the episode")
@@ -23,54 +28,31 @@ def add_arguments(p):
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def load_params(path):
-    """The stack parameters of ``--profile`` (Table I without one). A calibrated profile whose translational axes
-    were not identified by the calibration gets a note on stderr: the behaviors command vx and vy, and for an
-    unidentified axis the profile holds the nominal model, not a measurement."""
+def stderr_note(text: str) -> None:
     import sys
+    print(f"note: {text}", file=sys.stderr)
 
-    from ..params.stack import SIMULATION, load_stack_params
-    if path is None:
-        return SIMULATION
-    params = load_stack_params(path)
-    missing = [a for a, ok in zip(("vx", "vy", "wz"), params.uncertainty.execution.identified[:2]) if not ok]
-    if missing:
-        print(f"note: {path}: {', '.join(missing)} not identified by the calibration; its execution model and "
-              "residual bound are the nominal ones, not measured", file=sys.stderr)
-    return params
+
+def load_params(path):
+    """The stack parameters of ``--profile`` (Table I without one), with a note on stderr for axes the calibration
+    did not identify (see :func:`bigcbf.api.load_config`)."""
+    from ..api import load_config
+    return load_config(None, path, notes=stderr_note).stack
 
 
 def check_output(path: Path, what: str) -> None:
-    """Refuse to write where that would fail late or destroy something: a directory, or a missing parent."""
+    """Refuse to write where that would fail late or destroy something: a directory."""
     from ..errors import UserError
     if path.is_dir():
         raise UserError(f"{what} path is a directory", file=str(path))
 
 
 def run(args) -> int:
-    from ..control.methods import METHODS
-    from ..episode import Episode
-    from ..scenario import load_scenario
+    from ..api import load_config, run_episode
 
-    scenario = load_scenario(args.scenario, args.seed)
-    METHODS.get(args.method)
-    params = load_params(args.profile)
-    for path, what in ((args.video, "video"), (args.log, "log")):
-        if path is not None:
-            check_output(path, what)
-    ep = Episode(scenario, args.method, args.seed, params, perception=args.perception)
-    closers = []
-    if args.video is not None:
-        from ..video import EpisodeVideo
-        closers.append(EpisodeVideo(ep, args.video, camera=args.camera))
-    if args.log is not None:
-        from ..logio.episode_log import EpisodeLogger
-        closers.append(EpisodeLogger(ep, args.log))
-    try:
-        res = ep.run()
-    finally:
-        for c in closers:
-            c.close()
+    config = load_config(args.config, args.profile, notes=stderr_note)
+    res = run_episode(args.scenario, args.method, args.seed, config=config, perception=args.perception,
+                      video=args.video, camera=args.camera, log=args.log)
     out = res.metrics()
     if args.json:
         print(json.dumps(out))
@@ -79,6 +61,7 @@ def run(args) -> int:
             if k == "mode_history":
                 v = " ".join(f"{t:.1f}:{m}" for t, m in v)
             print(f"{k:<22} {v:.4g}" if isinstance(v, float) else f"{k:<22} {v}")
-    if args.video is not None and not args.json:
-        print(f"wrote {args.video}")
+        for path in (args.video, args.log):
+            if path is not None:
+                print(f"wrote {path}")
     return 0

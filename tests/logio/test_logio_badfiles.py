@@ -6,13 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import bigcbf
 from bigcbf.cli import main
 from bigcbf.errors import UserError
 from bigcbf.logio import CMD, ODOM, SCAN, LogWriter, find_topic, open_log, read_series
 from bigcbf.types import LaserScan, RobotState
 
-TURTLEBOT = Path(bigcbf.ROOT) / "tests/data/turtlebot3.bag"
+TURTLEBOT = Path(__file__).resolve().parents[1] / "data/turtlebot3.bag"
 
 
 def _drive_log(path: Path, seconds=40.0, cmd_topic="/cmd_vel", odom_topic="/odom", extra_twist=None):

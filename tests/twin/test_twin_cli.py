@@ -67,7 +67,7 @@ def test_calibrate_and_log_io_run_without_mujoco():
     """Log I/O and calibration run on a robot: they never import MuJoCo."""
     code = ("import sys, bigcbf.logio, twin.calibrate, twin.report; "
             "bad = [m for m in ('mujoco', 'dm_control', 'bigcbf.sim') if m in sys.modules]; print(bad)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=bigcbf.ROOT, check=True)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2], check=True)
     assert out.stdout.strip() == "[]"
 
 

@@ -6,11 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import bigcbf
 from bigcbf.cli import main
 from twin.calibrate import calibrate_log
 
-TURTLEBOT = Path(bigcbf.ROOT) / "tests/data/turtlebot3.bag"
+TURTLEBOT = Path(__file__).resolve().parents[1] / "data/turtlebot3.bag"
 
 
 @pytest.fixture(scope="module")
