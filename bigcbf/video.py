@@ -1,9 +1,21 @@
 """Episode videos: an observer that renders each control step with overlays, and side-by-side composition.
 
-Overlays drawn into the scene: LiDAR hits (red dots, placed with the robot's true pose), tracked obstacles with
-their inflated radius D_i^exec (amber rings; wall points as small amber dots), the goal (green disc, in the
-scene), the selected behavior's imagined path (cyan). Text: time, method, behavior mode, speed, whether the
-CBF is active. H.264 MP4 via bigcbf.sim.render.VideoWriter.
+What a frame shows (the legend in its lower right corner names each item present):
+
+- the robot: in the top view a white disc with its heading (drawn at least 9 pixels in radius, so it is seen in a
+  whole-scene view) and its footprint r_R; in the track view the model itself and its footprint;
+- its trail (the true path so far, magenta);
+- LiDAR hits (red dots, placed with the robot's true pose);
+- tracked obstacles: their inflated radius D_i^exec of Eq. (14) (amber rings), their estimated body radius (thin
+  white), their track id (``#id``) and their velocity over 1 s (blue arrows, dynamic tracks); wall points as
+  small amber dots;
+- BIG-CBF's imagination (Eq. (9)): the six behaviors' imagined paths of the latest selection (grey when accepted
+  by Eq. (16), red when rejected), the selected behavior's path thick cyan, path ends labelled with their behavior
+  (in the top view only the selected one's); for other methods the path the method reports (cyan);
+- the goal (green disc, in the scene).
+
+Text: method, time, behavior mode, speed, whether the CBF is active (and a red bar at the bottom while it is).
+H.264 MP4 via bigcbf.sim.render.VideoWriter.
 """
 from __future__ import annotations
 
@@ -12,9 +24,150 @@ from pathlib import Path
 import numpy as np
 
 from .episode import Episode, StepRecord
-from .sim.render import Renderer, VideoWriter, add_points, add_polyline, add_ring, put_text
+from .sim.render import (Renderer, VideoWriter, add_arrow, add_disc, add_points, add_polyline, add_ring, draw_legend,
+                         meters_per_pixel, project, put_label, put_text)
 
 CBF_ACTIVE_RGB = (255, 90, 60)
+
+#: overlay colours (RGBA in [0, 1]), shared by the scene and the legend
+LIDAR_RGBA = (1.0, 0.15, 0.15, 0.9)
+D_RING_RGBA = (1.0, 0.75, 0.0, 0.9)
+BODY_RING_RGBA = (1.0, 1.0, 1.0, 0.6)
+WALL_POINT_RGBA = (1.0, 0.75, 0.0, 0.9)
+VELOCITY_RGBA = (0.25, 0.55, 1.0, 0.95)
+SELECTED_RGBA = (0.1, 0.95, 0.95, 0.95)
+ACCEPTED_RGBA = (0.85, 0.85, 0.85, 0.6)
+REJECTED_RGBA = (0.95, 0.35, 0.35, 0.6)
+TRAIL_RGBA = (1.0, 0.4, 0.85, 0.9)
+ROBOT_RGBA = (0.97, 0.97, 0.97, 0.95)
+HEADING_RGBA = (0.1, 0.1, 0.1, 1.0)
+GOAL_RGBA = (0.1, 0.9, 0.2, 0.8)
+
+#: overlays above everything in the top view (pedestrians are 1.7 m tall); at their own height in the track view
+TOP_VIEW_Z = 1.75
+#: the robot's radius in the top view at least this many pixels
+ROBOT_ICON_PX = 9.0
+#: the trail keeps one point per this many control steps (0.2 s at T_C = 50 ms)
+TRAIL_EVERY = 4
+
+
+class Overlay:
+    """Draws one control step of an episode into a frame of one camera: the scene overlays, track ids, the legend
+    and the text. Shared by :class:`EpisodeVideo` and the Gymnasium environment's ``render()``."""
+
+    def __init__(self, episode: Episode, renderer: Renderer, camera: str = "top", title: str | None = None):
+        self.ep, self.renderer, self.camera = episode, renderer, camera
+        self.title = title or episode.method or "external"
+        self.mpp = meters_per_pixel(episode.world.model, camera, renderer.height)   # None: perspective (track)
+        self.trail: list[tuple[float, float]] = []
+        self._n = 0
+        laser = getattr(getattr(episode.perception, "params", None), "laser_x_m", 0.0)
+        self.laser_xy = (float(laser), float(getattr(episode.perception.params, "laser_y_m", 0.0)))
+
+    def observe(self, rec: StepRecord) -> None:
+        """Remember the robot's true position (the trail); call at every control step."""
+        if self._n % TRAIL_EVERY == 0 or not self.trail:
+            self.trail.append((rec.true_state.px, rec.true_state.py))
+        self._n += 1
+
+    def _w(self, pixels: float, metres: float) -> float:
+        """A line width: ``pixels`` wide in the top view (at least ``metres``), ``metres`` in the track view."""
+        return metres if self.mpp is None else max(metres, pixels * self.mpp)
+
+    def _imagination(self):
+        img = getattr(self.ep.planner, "last_imagination", None)
+        return img if img is not None and getattr(img, "p", None) is not None else None
+
+    def frame(self, rec: StepRecord) -> np.ndarray:
+        """The RGB frame of ``rec`` (H, W, 3) uint8."""
+        ts, top = rec.true_state, self.mpp is not None
+        z0 = TOP_VIEW_Z if top else 0.0
+        obs = rec.obstacles
+        D = rec.D if rec.D is not None and len(rec.D) == len(obs) else None
+        img = self._imagination()
+        r_robot = self.ep.params.uncertainty.r_robot_m
+        trail = self.trail + [(ts.px, ts.py)]
+
+        def decorate(scn):
+            if len(trail) > 1:
+                add_polyline(scn, np.array(trail), z=z0 + 0.02, width=self._w(2.0, 0.02), rgba=TRAIL_RGBA)
+            if rec.scan is not None:
+                r = np.asarray(rec.scan.ranges, float)
+                ok = np.isfinite(r)
+                a = rec.scan.angles[ok]
+                lx, ly = self.laser_xy
+                c, s = np.cos(ts.theta), np.sin(ts.theta)
+                ox, oy = ts.px + c * lx - s * ly, ts.py + s * lx + c * ly
+                pts = np.stack([ox + r[ok] * np.cos(ts.theta + a), oy + r[ok] * np.sin(ts.theta + a)], 1)
+                add_points(scn, pts[::2], z=z0 + 0.19, radius=self._w(2.2, 0.025), rgba=LIDAR_RGBA)
+            for i in range(len(obs)):
+                if obs.ids[i] < 0:
+                    continue
+                rad = float(D[i]) if D is not None else float(obs.r[i])
+                add_ring(scn, obs.p[i], rad, z=z0 + 0.012, rgba=D_RING_RGBA, width=self._w(1.5, 0.015))
+                add_ring(scn, obs.p[i], float(obs.r[i]), z=z0 + 0.012, rgba=BODY_RING_RGBA, segments=20,
+                         width=self._w(1.0, 0.01))
+                v = obs.v[i]
+                if not obs.static[i] and np.hypot(*v) > 0.05:
+                    add_arrow(scn, obs.p[i], obs.p[i] + v, z=z0 + 0.05, width=self._w(2.5, 0.03), rgba=VELOCITY_RGBA)
+            walls = obs.p[obs.ids < 0]
+            if len(walls):
+                add_points(scn, walls, z=z0 + 0.05, radius=self._w(2.0, 0.04), rgba=WALL_POINT_RGBA)
+            if img is not None:
+                for b, mode in enumerate(img.modes):
+                    if not img.available[b]:
+                        continue
+                    add_polyline(scn, img.p[b], z=z0 + 0.025, width=self._w(1.5, 0.015),
+                                 rgba=ACCEPTED_RGBA if img.accepted[b] else REJECTED_RGBA)
+            if rec.path is not None and len(rec.path) > 1:
+                add_polyline(scn, rec.path, z=z0 + 0.03, width=self._w(3.5, 0.035), rgba=SELECTED_RGBA)
+            if top:
+                rad = max(r_robot, ROBOT_ICON_PX * self.mpp)
+                add_disc(scn, (ts.px, ts.py), rad, z=z0 + 0.04, rgba=ROBOT_RGBA)
+                tip = (ts.px + 1.1 * rad * np.cos(ts.theta), ts.py + 1.1 * rad * np.sin(ts.theta))
+                add_arrow(scn, (ts.px, ts.py), tip, z=z0 + 0.05, width=self._w(2.5, 0.02), rgba=HEADING_RGBA)
+            add_ring(scn, (ts.px, ts.py), r_robot, z=z0 + 0.045, rgba=(0.3, 0.3, 0.3, 0.9) if top else BODY_RING_RGBA,
+                     segments=24, width=self._w(1.0, 0.012))
+
+        data = self.ep.world.data
+        frame = self.renderer.render(data, self.camera, decorate=decorate)
+        model, W, H = self.ep.world.model, self.renderer.width, self.renderer.height
+        # labels: track ids next to the tracks, behavior names at the ends of the imagined paths
+        tracked = np.flatnonzero(obs.ids >= 0)
+        if len(tracked):
+            p = obs.p[tracked]
+            pts = np.column_stack([p, np.full(len(p), z0 + 0.1 if top else 1.0)])
+            uv, front = project(model, data, self.camera, pts, W, H)
+            for k, i in enumerate(tracked):
+                if front[k]:
+                    put_label(frame, f"#{int(obs.ids[i])}", uv[k] + (7, -7), color=(255, 200, 60))
+        if img is not None:
+            ends = np.array([img.p[b][-1] for b in range(len(img.modes))])
+            uv, front = project(model, data, self.camera, np.column_stack([ends, np.full(len(ends), z0 + 0.03)]), W, H)
+            for b, mode in enumerate(img.modes):     # the top view is crowded: only the selected one there
+                sel = mode == rec.mode
+                if img.available[b] and front[b] and (sel or not top):
+                    put_label(frame, mode, uv[b] + (4, 4), scale=0.36,
+                              color=(60, 240, 240) if sel else (200, 200, 200))
+        speed = float(np.hypot(ts.vx, ts.vy))
+        put_text(frame, [f"{self.title}   t = {rec.t:5.2f} s",
+                         f"mode {rec.mode}   speed {speed:.2f} m/s",
+                         "CBF ACTIVE" if rec.cbf_active else "CBF idle"])
+        draw_legend(frame, self.legend(img is not None, rec.path is not None))
+        if rec.cbf_active:
+            frame[-8:, :] = CBF_ACTIVE_RGB
+        return frame
+
+    def legend(self, imagination: bool, path: bool) -> list[tuple[str, tuple, str]]:
+        items = [("robot, trail", TRAIL_RGBA, "line"), ("LiDAR hits", LIDAR_RGBA, "dot"),
+                 ("track #id: D_i (Eq. 14)", D_RING_RGBA, "ring"), ("velocity (1 s)", VELOCITY_RGBA, "arrow"),
+                 ("wall points", WALL_POINT_RGBA, "dot")]
+        if imagination:
+            items += [("imagined: selected", SELECTED_RGBA, "thick"), ("accepted (Eq. 16)", ACCEPTED_RGBA, "line"),
+                      ("rejected", REJECTED_RGBA, "line")]
+        elif path:
+            items += [("planned path", SELECTED_RGBA, "thick")]
+        return items + [("goal", GOAL_RGBA, "disc")]
 
 
 class EpisodeVideo:
@@ -23,53 +176,20 @@ class EpisodeVideo:
     def __init__(self, episode: Episode, path: str | Path, camera: str = "top", width: int = 640,
                  height: int = 480, every: int = 1, title: str | None = None):
         self.ep = episode
-        self.camera = camera
         self.every = max(1, every)
-        self.title = title or episode.method
         self.renderer = Renderer(episode.world.model, width, height)
+        self.overlay = Overlay(episode, self.renderer, camera, title)
         fps = 1.0 / (episode.params.T_C_s * self.every)
         self.writer = VideoWriter(path, fps=fps)
         self._n = 0
         episode.observers.append(self)
 
     def __call__(self, rec: StepRecord) -> None:
+        self.overlay.observe(rec)
         self._n += 1
         if (self._n - 1) % self.every:
             return
-        ts = rec.true_state
-
-        def decorate(scn):
-            if rec.scan is not None:
-                r = np.asarray(rec.scan.ranges, float)
-                ok = np.isfinite(r)
-                a = rec.scan.angles[ok]
-                lx, ly = 0.0435, 0.0
-                c, s = np.cos(ts.theta), np.sin(ts.theta)
-                ox, oy = ts.px + c * lx - s * ly, ts.py + s * lx + c * ly
-                pts = np.stack([ox + r[ok] * np.cos(ts.theta + a), oy + r[ok] * np.sin(ts.theta + a)], 1)
-                add_points(scn, pts[::2], z=0.19, radius=0.025)
-            obs = rec.obstacles
-            D = rec.D if rec.D is not None and len(rec.D) == len(obs) else None
-            for i in range(len(obs)):
-                if obs.ids[i] >= 0:
-                    rad = float(D[i]) if D is not None else float(obs.r[i])
-                    add_ring(scn, obs.p[i], rad, z=0.012, rgba=(1.0, 0.75, 0.0, 0.9))
-                    add_ring(scn, obs.p[i], float(obs.r[i]), z=0.012, rgba=(1.0, 1.0, 1.0, 0.6), segments=20)
-            walls = obs.p[obs.ids < 0]
-            if len(walls):
-                add_points(scn, walls, z=0.05, radius=0.04, rgba=(1.0, 0.75, 0.0, 0.9))
-            if rec.path is not None and len(rec.path) > 1:
-                add_polyline(scn, rec.path, z=0.03, width=0.03, rgba=(0.1, 0.95, 0.95, 0.9))
-            add_ring(scn, (ts.px, ts.py), 0.15, z=0.015, rgba=(0.9, 0.9, 0.9, 0.8), segments=24)
-
-        frame = self.renderer.render(self.ep.world.data, self.camera, decorate=decorate)
-        speed = float(np.hypot(ts.vx, ts.vy))
-        put_text(frame, [f"{self.title}   t = {rec.t:5.2f} s",
-                         f"mode {rec.mode}   speed {speed:.2f} m/s",
-                         "CBF ACTIVE" if rec.cbf_active else "CBF idle"])
-        if rec.cbf_active:
-            frame[-8:, :] = CBF_ACTIVE_RGB
-        self.writer.write(frame)
+        self.writer.write(self.overlay.frame(rec))
 
     def close(self) -> None:
         self.writer.close()

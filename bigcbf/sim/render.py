@@ -101,6 +101,97 @@ def add_ring(scn, center_xy, radius: float, z: float = 0.01, rgba=(1.0, 0.8, 0.0
     add_polyline(scn, pts, z=z, width=width, rgba=rgba)
 
 
+def add_arrow(scn, start_xy, end_xy, z: float = 0.05, width: float = 0.03, rgba=(0.1, 0.4, 1.0, 0.9)) -> None:
+    """An arrow on the floor plane from ``start_xy`` to ``end_xy`` (e.g. an obstacle's velocity over 1 s)."""
+    a, b = np.array([start_xy[0], start_xy[1], z], float), np.array([end_xy[0], end_xy[1], z], float)
+    if np.linalg.norm(b - a) < 1e-3 or scn.ngeom >= scn.maxgeom:
+        return
+    g = scn.geoms[scn.ngeom]
+    mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_ARROW, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
+                        np.asarray(rgba, np.float32))
+    mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_ARROW, width, a, b)
+    scn.ngeom += 1
+
+
+def add_disc(scn, center_xy, radius: float, z: float = 0.01, rgba=(0.95, 0.95, 0.95, 0.9)) -> None:
+    """A flat filled disc (e.g. the robot's icon in the top view)."""
+    _add(scn, mujoco.mjtGeom.mjGEOM_CYLINDER, (radius, 0.002, 0), (center_xy[0], center_xy[1], z), np.eye(3), rgba)
+
+
+def meters_per_pixel(model: mujoco.MjModel, camera: str, height: int) -> float | None:
+    """The scale of an orthographic camera (its fovy is the visible height in metres); None for a perspective one."""
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    if model.cam_projection[cam] != mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC:
+        return None
+    return float(model.cam_fovy[cam]) / height
+
+
+def project(model: mujoco.MjModel, data: mujoco.MjData, camera: str, points: np.ndarray, width: int,
+            height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (N, 2) (u right, v down) of world points (N, 3) in a camera's image, and which of them
+    lie in front of the camera (N,). The pinhole (or orthographic) model of MuJoCo's camera: axes from
+    ``data.cam_xmat`` (x right, y up, looking along -z), vertical field of view ``fovy``."""
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    R = data.cam_xmat[cam].reshape(3, 3)
+    d = (np.asarray(points, float).reshape(-1, 3) - data.cam_xpos[cam]) @ R      # camera-frame coordinates
+    if model.cam_projection[cam] == mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC:
+        scale = height / float(model.cam_fovy[cam])
+        uv = np.stack([width / 2 + scale * d[:, 0], height / 2 - scale * d[:, 1]], 1)
+        return uv, np.ones(len(d), bool)
+    f = 0.5 * height / np.tan(np.deg2rad(float(model.cam_fovy[cam])) / 2)
+    depth = -d[:, 2]
+    front = depth > 1e-6
+    z = np.where(front, depth, 1.0)
+    uv = np.stack([width / 2 + f * d[:, 0] / z, height / 2 - f * d[:, 1] / z], 1)
+    return uv, front
+
+
+def put_label(frame: np.ndarray, text: str, uv, scale: float = 0.42, color=(255, 255, 255)) -> None:
+    """A short text (e.g. a track id) with its lower-left corner at pixel ``uv``, on a dark box; clipped to the
+    frame."""
+    h, w = frame.shape[:2]
+    (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    x = int(np.clip(uv[0], 2, w - tw - 4))
+    y = int(np.clip(uv[1], th + 4, h - 4))
+    cv2.rectangle(frame, (x - 2, y - th - 3), (x + tw + 2, y + 3), (20, 20, 20), -1)
+    cv2.putText(frame, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
+
+
+def draw_legend(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], corner: str = "bottom-right",
+                scale: float = 0.38) -> np.ndarray:
+    """A legend box: one line per (label, rgba in [0, 1], kind), kind "line", "dot", "ring" or "arrow"."""
+    items = list(items)
+    if not items:
+        return frame
+    h, w = frame.shape[:2]
+    sizes = [cv2.getTextSize(lab, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0] for lab, _, _ in items]
+    line_h = max(s[1] for s in sizes) + 8
+    box_w = 34 + max(s[0] for s in sizes) + 8
+    box_h = line_h * len(items) + 8
+    x0 = w - box_w - 8 if corner.endswith("right") else 8
+    y0 = h - box_h - 14 if corner.startswith("bottom") else 8
+    overlay = frame.copy()
+    cv2.rectangle(overlay, (x0, y0), (x0 + box_w, y0 + box_h), (20, 20, 20), -1)
+    cv2.addWeighted(overlay, 0.75, frame, 0.25, 0, dst=frame)
+    for k, (label, rgba, kind) in enumerate(items):
+        yc = y0 + 4 + line_h * k + line_h // 2
+        col = tuple(int(255 * c) for c in rgba[:3])
+        sx = x0 + 6
+        if kind == "dot":
+            cv2.circle(frame, (sx + 10, yc), 4, col, -1, cv2.LINE_AA)
+        elif kind == "ring":
+            cv2.circle(frame, (sx + 10, yc), 7, col, 1, cv2.LINE_AA)
+        elif kind == "arrow":
+            cv2.arrowedLine(frame, (sx, yc), (sx + 22, yc), col, 2, cv2.LINE_AA, tipLength=0.4)
+        elif kind == "disc":
+            cv2.circle(frame, (sx + 10, yc), 6, col, -1, cv2.LINE_AA)
+        else:
+            cv2.line(frame, (sx, yc), (sx + 22, yc), col, 3 if kind == "thick" else 1, cv2.LINE_AA)
+        cv2.putText(frame, label, (x0 + 34, yc + sizes[k][1] // 2), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                    (235, 235, 235), 1, cv2.LINE_AA)
+    return frame
+
+
 def put_text(frame: np.ndarray, lines: Iterable[str], origin=(10, 24), scale: float = 0.55) -> np.ndarray:
     """Text lines in the top-left corner, white on a dark band, readable on any background."""
     y = origin[1]

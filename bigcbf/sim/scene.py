@@ -135,7 +135,7 @@ def compose(spec: SceneSpec) -> mjcf.RootElement:
     cx, cy = spec.robot_start[:2] if spec.goal is None else (np.add(spec.robot_start[:2], spec.goal) / 2)
     wb.add("camera", name="top", pos=(cx, cy, 10.0), euler=(0, 0, 0), fovy=2.1 * spec.extent)
     base = root.find("body", "base_link")
-    base.add("camera", name="track", mode="track", pos=(-1.6, 0, 1.5), xyaxes=(0, -1, 0, 0.68, 0, 0.73))
+    base.add("camera", name="track", mode="track", pos=(-4.2, 0, 3.9), xyaxes=(0, -1, 0, 0.68, 0, 0.73))
     return root
 
 
