@@ -1,6 +1,6 @@
 # Two commands do everything on a fresh Debian machine (Python 3.11+, no GPU):
 #   make demo   set up .venv and the system libraries, then run the demo
-#   make test   the same set-up, then the test suite
+#   make test   the same set-up, then the wheel check (scripts/check_wheel.sh) and the test suite
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 SYSLIBS := libegl1 libopengl0 libgl1-mesa-dri libgomp1
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test setup syslibs perf clean
+.PHONY: demo test setup syslibs perf clean wheel-check
 
 setup: syslibs $(STAMP)
 
@@ -30,11 +30,18 @@ $(STAMP): pyproject.toml constraints.txt
 demo: setup
 	$(VENV)/bin/bigcbf demo
 
+# the wheel check first (its failure does not stop the tests; either failing fails the target), the test
+# summary last
 test: setup
-	$(PY) -m pytest -q -p no:cacheprovider
+	@status=0; PY=$(PY) scripts/check_wheel.sh || status=1; \
+	$(PY) -m pytest -q -p no:cacheprovider || status=$$?; exit $$status
+
+# build the wheel, install it into a fresh venv outside the checkout, run the tour's first commands from there
+wheel-check: setup
+	PY=$(PY) scripts/check_wheel.sh
 
 perf: setup
 	$(VENV)/bin/bigcbf perf
 
 clean:
-	rm -rf $(VENV) *.egg-info
+	rm -rf $(VENV) *.egg-info build
