@@ -208,6 +208,11 @@ class Episode:
                 return
             self._physics()
 
+    @property
+    def last_scan(self):
+        """The latest LiDAR scan (None before the first)."""
+        return self._scan
+
     def obstacles_now(self) -> Obstacles:
         """The estimates at the pending control tick: up to one scan old, advanced to now with their velocity
         (Eq. (2))."""

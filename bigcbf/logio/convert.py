@@ -76,15 +76,21 @@ def twist_msg(u) -> dict:
     return {"linear": _vec3((u[0], u[1], 0.0)), "angular": _vec3((0.0, 0.0, u[2]))}
 
 
-def odometry_msg(t: float, s: RobotState, frame_id: str = "odom", child_frame_id: str = "base_link") -> dict:
-    """RobotState -> nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP 105)."""
+def odometry_msg(t: float, s: RobotState, frame_id: str = "odom", child_frame_id: str = "base_link",
+                 pose_cov=None, twist_cov=None) -> dict:
+    """RobotState -> nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP 105). Covariances:
+    6x6 row-major (x, y, z, rot x, rot y, rot z), default zero (the simulator's odometry has no noise model)."""
     return {
         "header": _header(t, frame_id), "child_frame_id": child_frame_id,
         "pose": {"pose": {"position": _vec3((s.px, s.py, 0.0)), "orientation": yaw_quaternion(s.theta)},
-                 "covariance": [0.0] * 36},
+                 "covariance": _cov36(pose_cov)},
         "twist": {"twist": {"linear": _vec3((s.vx, s.vy, 0.0)), "angular": _vec3((0.0, 0.0, s.wz))},
-                  "covariance": [0.0] * 36},
+                  "covariance": _cov36(twist_cov)},
     }
+
+
+def _cov36(cov) -> list[float]:
+    return [0.0] * 36 if cov is None else np.asarray(cov, float).reshape(36).tolist()
 
 
 def laser_scan_msg(scan: LaserScan) -> dict:
@@ -118,6 +124,102 @@ def tf_msg(t: float, s: RobotState, parent: str = "odom", child: str = "base_lin
 
 def string_msg(text: str) -> dict:
     return {"data": str(text)}
+
+
+def clock_msg(t: float) -> dict:
+    """rosgraph_msgs/Clock: the simulation time (what /clock carries when ``use_sim_time`` is on)."""
+    return {"clock": time_msg(t)}
+
+
+def static_tf_msg(t: float, transforms) -> dict:
+    """tf2_msgs/TFMessage of fixed transforms: ``transforms`` = [(parent, child, (x, y, z), yaw), ...]."""
+    return {"transforms": [{"header": _header(t, parent), "child_frame_id": child,
+                            "transform": {"translation": _vec3(xyz), "rotation": yaw_quaternion(yaw)}}
+                           for parent, child, xyz, yaw in transforms]}
+
+
+def pose_stamped_msg(t: float, x: float, y: float, yaw: float = 0.0, frame_id: str = "odom") -> dict:
+    """geometry_msgs/PoseStamped of a planar pose (e.g. the goal, as Nav2's /goal_pose)."""
+    return {"header": _header(t, frame_id),
+            "pose": {"position": _vec3((x, y, 0.0)), "orientation": yaw_quaternion(yaw)}}
+
+
+def path_msg(t: float, points_xy, frame_id: str = "odom") -> dict:
+    """nav_msgs/Path through 2-D points (K, 2), each pose facing the next point (the last one keeps the
+    previous heading), as Nav2's /plan."""
+    pts = np.asarray(points_xy, float).reshape(-1, 2)
+    d = np.diff(pts, axis=0)
+    yaw = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
+    yaw = np.concatenate([yaw, yaw[-1:] if len(yaw) else [0.0]])
+    return {"header": _header(t, frame_id),
+            "poses": [pose_stamped_msg(t, float(x), float(y), float(a), frame_id) for (x, y), a in zip(pts, yaw)]}
+
+
+def _cov6(cov2) -> list[float]:
+    """A 2x2 covariance of (x, y) placed in the 6x6 (x, y, z, rot x, rot y, rot z) row-major layout."""
+    c = np.zeros((6, 6))
+    c[:2, :2] = np.asarray(cov2, float)
+    return c.ravel().tolist()
+
+
+def tracked_obstacles_msg(t: float, obs: Obstacles, frame_id: str = "odom") -> dict:
+    """Obstacles -> bigcbf_msgs/TrackedObstacleArray (msgdefs.CUSTOM_TYPES): ids, radius, static flag, centre with
+    the tracker's position covariance, velocity."""
+    items = []
+    for k in range(len(obs)):
+        p, v = obs.p[k], obs.v[k]
+        items.append({"id": int(obs.ids[k]), "is_static": bool(obs.static[k]), "radius": float(obs.r[k]),
+                      "pose": {"pose": {"position": _vec3((p[0], p[1], 0.0)), "orientation": yaw_quaternion(0.0)},
+                               "covariance": _cov6(obs.cov[k])},
+                      "twist": {"twist": {"linear": _vec3((v[0], v[1], 0.0)), "angular": _vec3((0.0, 0.0, 0.0))},
+                                "covariance": [0.0] * 36}})
+    return {"header": _header(t, frame_id), "obstacles": items}
+
+
+LINE_STRIP, TEXT_VIEW_FACING = 4, 9
+_RING_RGBA = (1.0, 0.75, 0.0, 0.9)
+_PATH_RGBA = {True: (0.1, 0.95, 0.95, 1.0), False: (0.85, 0.85, 0.85, 0.6)}
+_REJECTED_RGBA = (0.95, 0.35, 0.35, 0.6)
+
+
+def _circle(xy, radius: float, z: float, n: int = 48) -> list[tuple[float, float, float]]:
+    a = np.linspace(0.0, 2 * np.pi, n + 1)
+    return [(float(xy[0] + radius * math.cos(x)), float(xy[1] + radius * math.sin(x)), z) for x in a]
+
+
+def inflated_radius_markers(t: float, obs: Obstacles, D, frame_id: str = "odom") -> dict:
+    """The CBF's inflated radii D_i of Eq. (14) as visualization_msgs/MarkerArray: a DELETEALL, then per tracked
+    obstacle a LINE_STRIP circle of radius D_i (namespace ``D``, id = track id) and its track id as text
+    (namespace ``id``). Wall points (no track) are left out."""
+    markers = [_marker(t, frame_id, "", 0, LINE_STRIP, action=DELETEALL)]
+    D = np.asarray(D, float)
+    if len(D) != len(obs):
+        return {"markers": markers}
+    for k in range(len(obs)):
+        tid = int(obs.ids[k])
+        if tid < 0:
+            continue
+        markers.append(_marker(t, frame_id, "D", tid, LINE_STRIP, scale=(0.02, 0.0, 0.0), rgba=_RING_RGBA,
+                               points=_circle(obs.p[k], float(D[k]), 0.02), text=f"D={float(D[k]):.3f}"))
+        markers.append(_marker(t, frame_id, "id", tid, TEXT_VIEW_FACING, obs.p[k], MARKER_HEIGHT_M + 0.25,
+                               scale=(0.0, 0.0, 0.2), rgba=(1.0, 1.0, 1.0, 1.0), text=f"#{tid}"))
+    return {"markers": markers}
+
+
+def imagination_markers(t: float, modes, paths, accepted, selected: str | None, frame_id: str = "odom",
+                        available=None) -> dict:
+    """BIG-CBF's imagined paths of one selection (Eq. (9)) as visualization_msgs/MarkerArray: a DELETEALL, then one
+    LINE_STRIP per available behavior (namespace = its name; selected cyan, accepted grey, rejected red)."""
+    markers = [_marker(t, frame_id, "", 0, LINE_STRIP, action=DELETEALL)]
+    for b, mode in enumerate(modes):
+        if available is not None and not available[b]:
+            continue
+        sel = mode == selected
+        rgba = _PATH_RGBA[True] if sel else (_PATH_RGBA[False] if accepted[b] else _REJECTED_RGBA)
+        pts = [(float(x), float(y), 0.03) for x, y in np.asarray(paths[b], float).reshape(-1, 2)]
+        markers.append(_marker(t, frame_id, mode, b, LINE_STRIP, scale=(0.04 if sel else 0.015, 0.0, 0.0),
+                               rgba=rgba, points=pts, text=mode))
+    return {"markers": markers}
 
 
 def _marker(t, frame_id, ns, mid, mtype, pose_xy=(0.0, 0.0), z=0.0, yaw=0.0, scale=(0.0, 0.0, 0.0), rgba=(0, 0, 0, 0),

@@ -1,20 +1,35 @@
 """Write robot logs as ROS 2 MCAP (mcap + mcap-ros2-support) with standard message types.
 
-Foxglove, ``ros2 bag`` (with the MCAP storage plugin) and rosbags open the files. Log time = the time passed to
-each method (simulation time in seconds; header stamps are the same clock). Chunks are small (64 KiB) so that a
-log cut short (a crash, a full disk) still yields everything up to the last complete chunk.
+Foxglove, ``ros2 bag`` (with the MCAP storage plugin) and rosbags open the files. Chunks are small (64 KiB) so
+that a log cut short (a crash, a full disk) still yields everything up to the last complete chunk.
 
-Topics of an episode (issue 8) and the method that writes each::
+Time base: simulation time. The log time of every message and every header stamp are the seconds passed to the
+method that wrote it, which for a simulated run is the simulation time since the episode's start (as a robot
+recorded with ``use_sim_time``); ``/clock`` (rosgraph_msgs/Clock) carries the same clock. Tools that show dates
+show the epoch (1970-01-01) plus that time: choose "seconds" as the time format in Foxglove.
 
-    /scan                sensor_msgs/LaserScan            scan()
-    /odom                nav_msgs/Odometry                odom()           wheel odometry, pose in odom
-    /imu                 sensor_msgs/Imu                  imu()
-    /cmd_vel             geometry_msgs/Twist              cmd_vel()        u_safe, what the robot is sent
-    /cmd_vel_in          geometry_msgs/Twist              cmd_vel_in()     u_in, before the CBF filter
-    /tf                  tf2_msgs/TFMessage               tf()             odom -> base_link
-    /ground_truth/odom   nav_msgs/Odometry                ground_truth()
-    /behavior            std_msgs/String                  behavior()       the selected behavior mode
-    /tracked_obstacles   visualization_msgs/MarkerArray   obstacles()      see bigcbf.logio.convert
+Topics and the method that writes each::
+
+    /clock                       rosgraph_msgs/Clock              clock()
+    /tf_static                   tf2_msgs/TFMessage               tf_static()      base_link -> laser, imu_link (1)
+    /robot_description           std_msgs/String                  robot_description()   the model's text (1)
+    /tf                          tf2_msgs/TFMessage               tf()             odom -> base_link
+    /scan                        sensor_msgs/LaserScan            scan()           frame laser
+    /odom                        nav_msgs/Odometry                odom()           wheel odometry, pose in odom
+    /imu                         sensor_msgs/Imu                  imu()            frame imu_link
+    /cmd_vel                     geometry_msgs/Twist              cmd_vel()        u_safe, what the robot is sent
+    /cmd_vel_in                  geometry_msgs/Twist              cmd_vel_in()     u_in, before the CBF filter
+    /ground_truth/odom           nav_msgs/Odometry                ground_truth()
+    /goal_pose                   geometry_msgs/PoseStamped        goal_pose()      as Nav2's
+    /plan                        nav_msgs/Path                    plan()           the selected behavior's path
+    /plan/candidates             visualization_msgs/MarkerArray   candidates()     BIG-CBF's imagined paths
+    /behavior                    std_msgs/String                  behavior()       the selected behavior mode
+    /tracked_obstacles           visualization_msgs/MarkerArray   obstacles()      see bigcbf.logio.convert
+    /obstacles                   bigcbf_msgs/TrackedObstacleArray obstacle_states()  with covariances
+    /cbf/inflated_radius         visualization_msgs/MarkerArray   inflated_radii() D_i rings and track ids
+
+(1) written once at the start with the QoS of a latched topic (durability transient local, as rosbag2 records
+it in the channel's ``offered_qos_profiles``), so a player gives them to late subscribers.
 """
 from __future__ import annotations
 
@@ -33,6 +48,32 @@ TOPIC_TF = "/tf"
 TOPIC_GROUND_TRUTH = "/ground_truth/odom"
 TOPIC_BEHAVIOR = "/behavior"
 TOPIC_OBSTACLES = "/tracked_obstacles"
+TOPIC_OBSTACLE_STATES = "/obstacles"
+TOPIC_CLOCK = "/clock"
+TOPIC_TF_STATIC = "/tf_static"
+TOPIC_ROBOT_DESCRIPTION = "/robot_description"
+TOPIC_GOAL = "/goal_pose"
+TOPIC_PLAN = "/plan"
+TOPIC_CANDIDATES = "/plan/candidates"
+TOPIC_INFLATED = "/cbf/inflated_radius"
+
+#: rosbag2's record of a latched publisher's QoS (reliable, transient local, keep last 1)
+LATCHED_QOS = """- history: 1
+  depth: 1
+  reliability: 1
+  durability: 1
+  deadline:
+    sec: 2147483647
+    nsec: 4294967295
+  lifespan:
+    sec: 2147483647
+    nsec: 4294967295
+  liveliness: 1
+  liveliness_lease_duration:
+    sec: 2147483647
+    nsec: 4294967295
+  avoid_ros_namespace_conventions: false
+"""
 
 CHUNK_BYTES = 64 * 1024
 
@@ -60,11 +101,18 @@ class LogWriter:
             self._w.add_metadata("bigcbf", {str(k): str(v) for k, v in metadata.items()})
 
     # --- generic ---------------------------------------------------------------------------------------------
-    def write(self, topic: str, msgtype: str, t: float, message: dict) -> None:
-        """Write one message (a dict shaped like ``msgtype``) on ``topic`` at log time ``t`` [s]."""
+    def write(self, topic: str, msgtype: str, t: float, message: dict, *, latched: bool = False) -> None:
+        """Write one message (a dict shaped like ``msgtype``) on ``topic`` at log time ``t`` [s]. ``latched``: the
+        topic's channel records a transient-local QoS (set by its first message)."""
         schema = self._schemas.get(msgtype)
         if schema is None:
             schema = self._schemas[msgtype] = self._w.register_msgdef(msgtype, msgdefs.schema_text(msgtype))
+        if latched and topic not in self._w._channel_ids:
+            # mcap-ros2-support registers channels without metadata; register this one ourselves, as its writer
+            # would, plus the QoS (its attributes are private: the version is pinned in constraints.txt)
+            self._w._channel_ids[topic] = self._w._writer.register_channel(
+                topic=topic, message_encoding="cdr", schema_id=schema.id,
+                metadata={"offered_qos_profiles": LATCHED_QOS})
         ns = convert.to_ns(t)
         self._w.write_message(topic, schema, message, log_time=ns, publish_time=ns, sequence=self.counts.get(topic, 0))
         self.counts[topic] = self.counts.get(topic, 0) + 1
@@ -98,6 +146,37 @@ class LogWriter:
 
     def obstacles(self, t: float, obs: Obstacles, topic: str = TOPIC_OBSTACLES) -> None:
         self.write(topic, msgdefs.MARKER_ARRAY, t, convert.markers_msg(t, obs, self.odom_frame))
+
+    def obstacle_states(self, t: float, obs: Obstacles, topic: str = TOPIC_OBSTACLE_STATES) -> None:
+        """The estimates with their covariances (bigcbf_msgs/TrackedObstacleArray)."""
+        self.write(topic, msgdefs.TRACKED_OBSTACLE_ARRAY, t, convert.tracked_obstacles_msg(t, obs, self.odom_frame))
+
+    def inflated_radii(self, t: float, obs: Obstacles, D, topic: str = TOPIC_INFLATED) -> None:
+        """The CBF's D_i (Eq. (14)) as rings around the tracked obstacles, with their track ids."""
+        self.write(topic, msgdefs.MARKER_ARRAY, t, convert.inflated_radius_markers(t, obs, D, self.odom_frame))
+
+    def clock(self, t: float, topic: str = TOPIC_CLOCK) -> None:
+        self.write(topic, msgdefs.CLOCK, t, convert.clock_msg(t))
+
+    def tf_static(self, t: float, transforms, topic: str = TOPIC_TF_STATIC) -> None:
+        """Fixed transforms [(parent, child, (x, y, z), yaw), ...], latched."""
+        self.write(topic, msgdefs.TF_MESSAGE, t, convert.static_tf_msg(t, transforms), latched=True)
+
+    def robot_description(self, t: float, text: str, topic: str = TOPIC_ROBOT_DESCRIPTION) -> None:
+        """The robot model's text (std_msgs/String), latched."""
+        self.write(topic, msgdefs.STRING, t, convert.string_msg(text), latched=True)
+
+    def goal_pose(self, t: float, goal_xy, topic: str = TOPIC_GOAL) -> None:
+        self.write(topic, msgdefs.POSE_STAMPED, t,
+                   convert.pose_stamped_msg(t, float(goal_xy[0]), float(goal_xy[1]), 0.0, self.odom_frame))
+
+    def plan(self, t: float, points_xy, topic: str = TOPIC_PLAN) -> None:
+        self.write(topic, msgdefs.PATH, t, convert.path_msg(t, points_xy, self.odom_frame))
+
+    def candidates(self, t: float, modes, paths, accepted, selected: str | None, available=None,
+                   topic: str = TOPIC_CANDIDATES) -> None:
+        self.write(topic, msgdefs.MARKER_ARRAY, t,
+                   convert.imagination_markers(t, modes, paths, accepted, selected, self.odom_frame, available))
 
     # --- life cycle ------------------------------------------------------------------------------------------
     def close(self) -> None:

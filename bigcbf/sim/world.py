@@ -149,6 +149,30 @@ class SimWorld:
                 "angular_velocity": tuple(s[self._imu_gyro:self._imu_gyro + 3]),
                 "linear_acceleration": tuple(s[self._imu_acc:self._imu_acc + 3])}
 
+    #: the sensor frames the stack's messages use (REP 105 names) and the model's sites that carry them
+    SENSOR_FRAMES = {"laser": "lidar", "imu_link": "imu"}
+
+    def sensor_frames(self) -> dict[str, tuple[float, float, float, float]]:
+        """Pose of each sensor frame in ``base_link`` as (x, y, z, yaw) [m, rad], from the model's sites. ``base_link``
+        is the robot's frame on the floor (planar odometry puts it at z = 0), so z is the height above the floor
+        with the robot at rest."""
+        m = self.model
+        base_z = float(m.qpos0[self._qadr + 2])            # the body's rest height above the floor
+        out = {}
+        for frame, site in self.SENSOR_FRAMES.items():
+            k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)
+            if k < 0 or m.site_bodyid[k] != self._base:
+                raise ValueError(f"the model has no site {site!r} on base_link for the {frame} frame")
+            x, y, z = (float(v) for v in m.site_pos[k])
+            out[frame] = (x, y, z + base_z, _yaw(m.site_quat[k]))
+        return out
+
+    @staticmethod
+    def robot_description() -> str:
+        """The robot model's text (MJCF, the file the scenes include)."""
+        from .scene import ROBOT_XML
+        return ROBOT_XML.read_text()
+
     def scan(self) -> LaserScan:
         return self.lidar.scan(self.data, self.t)
 

@@ -1,0 +1,142 @@
+"""An episode's MCAP as a Nav2 user opens it in Foxglove: every channel reads back with rosbags, one TF tree
+connects every frame a message uses, latched topics carry a transient-local QoS, the time base is the simulation
+clock, and the messages say what the episode did (goal, plan, obstacles with covariances, D_i rings)."""
+from collections import defaultdict
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from bigcbf.control.behaviors import BEHAVIORS
+from bigcbf.episode import Episode
+from bigcbf.logio.episode_log import EpisodeLogger
+from bigcbf.params.stack import SIMULATION
+from bigcbf.scenario import load_scenario
+
+TYPES = {
+    "/clock": "rosgraph_msgs/msg/Clock", "/tf_static": "tf2_msgs/msg/TFMessage", "/tf": "tf2_msgs/msg/TFMessage",
+    "/robot_description": "std_msgs/msg/String", "/goal_pose": "geometry_msgs/msg/PoseStamped",
+    "/scan": "sensor_msgs/msg/LaserScan", "/odom": "nav_msgs/msg/Odometry", "/imu": "sensor_msgs/msg/Imu",
+    "/cmd_vel": "geometry_msgs/msg/Twist", "/cmd_vel_in": "geometry_msgs/msg/Twist",
+    "/ground_truth/odom": "nav_msgs/msg/Odometry", "/behavior": "std_msgs/msg/String", "/plan": "nav_msgs/msg/Path",
+    "/plan/candidates": "visualization_msgs/msg/MarkerArray", "/tracked_obstacles": "visualization_msgs/msg/MarkerArray",
+    "/obstacles": "bigcbf_msgs/msg/TrackedObstacleArray", "/cbf/inflated_radius": "visualization_msgs/msg/MarkerArray",
+}
+
+
+@pytest.fixture(scope="module")
+def episode_log(tmp_path_factory):
+    """4 s of the single person crossing with BIG-CBF (the pedestrian is tracked from about 1 s on)."""
+    path = tmp_path_factory.mktemp("mcap") / "episode.mcap"
+    sc = load_scenario("single_person_crossing", 0)
+    ep = Episode(sc, "big-cbf", 0, SIMULATION, time_limit_s=4.0)
+    logger = EpisodeLogger(ep, path)
+    res = ep.run()
+    logger.close()
+    msgs = defaultdict(list)
+    with AnyReader([path]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        for con, t, raw in reader.messages():
+            msgs[con.topic].append((t * 1e-9, reader.deserialize(raw, con.msgtype)))
+    return path, sc, res, types, msgs
+
+
+def _header_frames(msg, out: set) -> None:
+    """Every frame_id of every header inside a message (arrays of markers, poses, obstacles included)."""
+    if hasattr(msg, "frame_id") and hasattr(msg, "stamp"):
+        out.add(msg.frame_id)
+    if hasattr(msg, "child_frame_id"):
+        out.add(msg.child_frame_id)
+    for name in getattr(msg, "__dataclass_fields__", ()):
+        if name == "texture":                    # a Marker's unused texture image (no frame, no data)
+            continue
+        v = getattr(msg, name)
+        for x in (v if isinstance(v, list) else [v]):
+            if hasattr(x, "__dataclass_fields__"):
+                _header_frames(x, out)
+
+
+def test_every_channel_reads_back_with_its_type(episode_log):
+    _, _, res, types, msgs = episode_log
+    assert types == TYPES
+    n_ctrl = res.control_steps
+    for topic in ("/clock", "/tf", "/odom", "/cmd_vel", "/cmd_vel_in", "/ground_truth/odom", "/imu", "/behavior"):
+        assert len(msgs[topic]) == n_ctrl, topic
+    for topic in ("/tf_static", "/robot_description", "/goal_pose"):
+        assert len(msgs[topic]) == 1 and msgs[topic][0][0] == 0.0, topic
+    assert len(msgs["/scan"]) == len(msgs["/obstacles"]) == len(msgs["/cbf/inflated_radius"]) == 40   # 10 Hz
+    assert 4 <= len(msgs["/plan"]) == len(msgs["/plan/candidates"]) <= 9          # one per selection (2 Hz)
+
+
+def test_tf_tree_connects_every_frame_used(episode_log):
+    _, _, _, _, msgs = episode_log
+    parent = {}
+    for topic in ("/tf", "/tf_static"):
+        for _, m in msgs[topic]:
+            for tr in m.transforms:
+                assert parent.setdefault(tr.child_frame_id, tr.header.frame_id) == tr.header.frame_id  # a tree
+    used = set()
+    for topic, items in msgs.items():
+        for _, m in items:
+            _header_frames(m, used)
+    assert used == {"odom", "base_link", "laser", "imu_link"}
+    for frame in used:                                # every frame reaches the root odom through the tree
+        f, hops = frame, 0
+        while f != "odom":
+            f, hops = parent[f], hops + 1
+            assert hops < 5
+    static = {tr.child_frame_id: tr for tr in msgs["/tf_static"][0][1].transforms}
+    assert static["laser"].transform.translation.x == pytest.approx(0.0435)          # the model's LiDAR site
+    assert static["laser"].transform.translation.z == pytest.approx(0.192, abs=1e-3)
+
+
+def test_time_base_is_the_simulation_clock(episode_log):
+    _, _, res, _, msgs = episode_log
+    clock = [(t, m.clock.sec + 1e-9 * m.clock.nanosec) for t, m in msgs["/clock"]]
+    assert clock[0] == (0.0, 0.0)
+    assert all(t == pytest.approx(c, abs=1e-9) for t, c in clock)
+    assert np.all(np.diff([c for _, c in clock]) == pytest.approx(SIMULATION.T_C_s))
+    assert clock[-1][1] <= res.sim_time_s
+    for t, m in msgs["/odom"]:
+        assert m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec == pytest.approx(t, abs=1e-9)
+
+
+def test_latched_topics_are_transient_local_and_describe_the_robot(episode_log):
+    path, _, _, _, msgs = episode_log
+    with open(path, "rb") as fh:
+        channels = {c.topic: c for c in make_reader(fh).get_summary().channels.values()}
+    for topic in ("/tf_static", "/robot_description"):
+        qos = channels[topic].metadata["offered_qos_profiles"]
+        assert "durability: 1" in qos and "reliability: 1" in qos, topic
+    assert "offered_qos_profiles" not in channels["/tf"].metadata
+    text = msgs["/robot_description"][0][1].data
+    assert '<mujoco model="rosmaster_x3">' in text and 'site name="lidar"' in text
+
+
+def test_goal_plan_obstacles_and_rings_say_what_the_episode_did(episode_log):
+    _, sc, _, _, msgs = episode_log
+    g = msgs["/goal_pose"][0][1].pose.position
+    assert (g.x, g.y) == pytest.approx(tuple(sc.robot.goal))
+    odom = {round(t, 6): m.pose.pose.position for t, m in msgs["/odom"]}
+    for t, path in msgs["/plan"]:                      # each plan starts where the robot was (the imagination's p_0)
+        p0, o = path.poses[0].pose.position, odom[round(t, 6)]
+        assert path.header.frame_id == "odom" and len(path.poses) == SIMULATION.N + 1
+        assert np.hypot(p0.x - o.x, p0.y - o.y) < 1e-6
+    for _, cand in msgs["/plan/candidates"]:
+        names = [m.ns for m in cand.markers[1:]]
+        assert set(names) <= set(BEHAVIORS) and len(names) >= 5
+    tracked = [(t, o) for t, arr in msgs["/obstacles"] for o in arr.obstacles if o.id >= 0]
+    assert tracked, "the pedestrian is tracked"
+    for _, o in tracked:
+        cov = np.array(o.pose.covariance).reshape(6, 6)
+        assert cov[0, 0] > 0 and cov[1, 1] > 0 and cov[0, 1] == cov[1, 0] and np.all(cov[2:] == 0)
+    walls = [o for _, arr in msgs["/obstacles"] for o in arr.obstacles if o.id < 0]
+    assert all(o.radius == 0.0 for o in walls)
+    rings = [m for _, arr in msgs["/cbf/inflated_radius"] for m in arr.markers if m.ns == "D"]
+    assert len(rings) == len(tracked)
+    for m in rings:                                    # a circle of radius D_i > r_R + r_i around the track
+        pts = np.array([(p.x, p.y) for p in m.points])
+        radius = np.hypot(*(pts - pts[:-1].mean(axis=0)[None]).T)        # (the last point closes the ring)
+        D = float(m.text.split("=")[1])
+        assert np.allclose(radius, D, atol=2e-3) and D > SIMULATION.uncertainty.r_robot_m + 0.1
