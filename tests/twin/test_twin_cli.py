@@ -82,3 +82,23 @@ def test_no_bigcbf_module_imports_twin_except_the_cli():
         text = (pkg / "cli" / f"{name}.py").read_text()
         top = text.split("\ndef run(")[0]
         assert not pat.search(top), name
+
+
+def test_twin_api_gives_what_the_commands_print(short_drive, capsys):
+    """twin.calibrate_log and twin.replay_log (the Python API) are what bigcbf calibrate and replay run."""
+    import twin
+    d, log = short_drive
+    cal = twin.calibrate_log(log)
+    assert isinstance(cal, twin.Calibration)
+    capsys.readouterr()
+    assert main(["calibrate", str(log), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    mine = cal.to_json()
+    assert (mine["A"], mine["d"], mine["tau95_s"], mine["e_zoh_m"]) == (out["A"], out["d"], out["tau95_s"],
+                                                                         out["e_zoh_m"])
+    prof = twin.write_profile(cal, d / "api_profile.toml")
+    rep = twin.replay_log(log, prof)
+    assert isinstance(rep, twin.ReplayResult) and set(rep.runs) == {"nominal", "calibrated"}
+    assert main(["replay", str(log), "--profile", str(prof), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert rep.to_json()["runs"]["calibrated"]["velocity_rmse"] == cli["runs"]["calibrated"]["velocity_rmse"]
