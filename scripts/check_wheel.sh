@@ -42,6 +42,7 @@ for pth in sorted(site.glob("*.pth")):
 ' > "$site_new/zz_borrowed_dependencies.pth"
 fi
 cp constraints.txt "$tmp/"
+README="$PWD/README.md"
 cd "$tmp"                                     # nothing of the checkout is on the path from here on
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 B="$tmp/venv/bin/bigcbf"
@@ -61,4 +62,17 @@ n=$(wc -l < scenarios.txt)
 sed 's/^time_limit_s = .*/time_limit_s = 3.0/' "$("$tmp/venv/bin/python" -c 'import bigcbf; print(bigcbf.SCENARIOS)')/corridor_meeting.toml" > my_scene.toml
 "$B" run my_scene.toml --method dwa --seed 3 --log my_scene.mcap | grep -E "^(scenario|sim_time_s|wrote)"
 "$tmp/venv/bin/python" -c "import bigcbf; r = bigcbf.run_episode('single_person_crossing', 'cbf-only', seed=1, time_limit_s=2.0); print('API:', type(r).__name__, r.sim_time_s, 's')"
+if [ "$mode" != "${mode#full}" ] || [ "${WHEEL_CHECK_TOUR:-0}" = "1" ]; then
+    # the README's tour, line by line, with this venv's bigcbf and python first on the PATH
+    mkdir tour && cd tour
+    awk '/^A tour/ {on = 1; next} on && /^    / {print substr($0, 5); seen = 1; next} on && seen {exit}' \
+        "$README" > tour.sh
+    echo "the README's tour ($(wc -l < tour.sh) commands):"
+    while IFS= read -r line; do
+        echo "\$ $line"
+        PATH="$tmp/venv/bin:$PATH" bash -c "$line" > out.txt 2>&1 || { cat out.txt; echo "wheel check: failed: $line" >&2; exit 1; }
+        tail -n 3 out.txt | cut -c1-160
+    done < tour.sh
+    cd ..
+fi
 echo "wheel check passed ($((SECONDS - t0)) s, then deleting the venv)"

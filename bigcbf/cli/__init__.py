@@ -46,6 +46,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"bigcbf {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:              # the reader went away (e.g. `bigcbf run ... | head`): stop quietly
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":
