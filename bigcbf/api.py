@@ -66,12 +66,13 @@ def load_scenario(scenario, seed: int = 0):
 def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str | Path | RunConfig | None = None,
                 profile: str | Path | None = None, perception: str = "lidar", time_limit_s: float | None = None,
                 video: str | Path | None = None, camera: str = "top", log: str | Path | None = None,
-                observers: Iterable[Callable] = ()):
+                live=None, observers: Iterable[Callable] = ()):
     """Run one episode and return its :class:`bigcbf.episode.EpisodeResult` (``.metrics()`` gives a dict).
 
     ``scenario``: a name (``bigcbf scenarios``), a scenario TOML path, or a Scenario. ``method``: a registered
     method, an entry point of ``bigcbf.methods`` or ``package.module:Class``. ``config``/``profile``: see
-    :func:`load_config`. ``video``: an H.264 MP4 (``camera`` top or track); ``log``: a ROS 2 MCAP.
+    :func:`load_config`. ``video``: an H.264 MP4 (``camera`` top or track); ``log``: a ROS 2 MCAP; ``live``: a
+    :class:`bigcbf.logio.live.LiveWriter` to stream the log's topics to Foxglove (paced at real time).
     ``observers``: callables that receive every control step's :class:`bigcbf.episode.StepRecord`.
     """
     from .control.methods import resolve_method
@@ -95,6 +96,11 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
         if log is not None:
             from .logio.episode_log import EpisodeLogger
             closers.append(EpisodeLogger(ep, log))
+        if live is not None:
+            from .logio.episode_log import EpisodeLogger
+            from .logio.live import RealTimePacer
+            EpisodeLogger(ep, writer=live)             # the caller owns (and closes) the live writer
+            ep.observers.append(RealTimePacer())
         return ep.run()
     finally:
         for c in closers:

@@ -25,6 +25,9 @@ def add_arguments(p):
     p.add_argument("--video", type=Path, default=None, help="write an H.264 MP4 of the episode")
     p.add_argument("--camera", choices=["top", "track"], default="top", help="video view (default top)")
     p.add_argument("--log", type=Path, default=None, help="record the episode as ROS 2 MCAP")
+    p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
+                   help="stream the log's topics to Foxglove while the episode runs at real time (WebSocket on "
+                        "127.0.0.1:PORT, default 8765; pip install 'bigcbf[live]')")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -40,6 +43,26 @@ def load_params(path):
     return load_config(None, path, notes=stderr_note).stack
 
 
+def start_live(port: int):
+    """A LiveWriter on 127.0.0.1:port, announced on stderr; UserError without foxglove-sdk or with a busy port."""
+    import sys
+
+    from ..errors import UserError
+    try:
+        from ..logio.live import LiveWriter
+        import foxglove  # noqa: F401
+    except ImportError:
+        raise UserError("--live needs foxglove-sdk, which is not installed: pip install 'bigcbf[live]'") from None
+    if not 0 <= port < 65536:
+        raise UserError(f"--live: a port is in [0, 65535], got {port}")
+    try:
+        live = LiveWriter(port=port)
+    except Exception as exc:      # the SDK raises its own error type for a port in use
+        raise UserError(f"--live: cannot serve on 127.0.0.1:{port} ({exc})") from None
+    print(f"streaming to Foxglove on {live.url} (open a Foxglove WebSocket connection); real time", file=sys.stderr)
+    return live
+
+
 def check_output(path: Path, what: str) -> None:
     """Refuse to write where that would fail late or destroy something: a directory."""
     from ..errors import UserError
@@ -51,8 +74,15 @@ def run(args) -> int:
     from ..api import load_config, run_episode
 
     config = load_config(args.config, args.profile, notes=stderr_note)
-    res = run_episode(args.scenario, args.method, args.seed, config=config, perception=args.perception,
-                      video=args.video, camera=args.camera, log=args.log)
+    live = None
+    if args.live is not None:
+        live = start_live(args.live)
+    try:
+        res = run_episode(args.scenario, args.method, args.seed, config=config, perception=args.perception,
+                          video=args.video, camera=args.camera, log=args.log, live=live)
+    finally:
+        if live is not None:
+            live.close()
     out = res.metrics()
     if args.json:
         print(json.dumps(out))

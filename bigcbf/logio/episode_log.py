@@ -21,16 +21,17 @@ from .writer import LogWriter
 
 
 class EpisodeLogger:
-    """``logger = EpisodeLogger(episode, path); episode.run(); logger.close()``."""
+    """``logger = EpisodeLogger(episode, path); episode.run(); logger.close()``. ``writer``: another sink with
+    LogWriter's methods instead of a file (``bigcbf.logio.live.LiveWriter`` streams to Foxglove)."""
 
-    def __init__(self, episode, path: str | Path):
+    def __init__(self, episode, path: str | Path | None = None, *, writer: LogWriter | None = None):
         meta = {k: str(getattr(episode, k)) for k in ("method", "seed") if hasattr(episode, k)}
         scenario = getattr(episode, "scenario", None)
         if scenario is not None and hasattr(scenario, "name"):
             meta["scenario"] = scenario.name
         meta["time_base"] = ("simulation time: log times and header stamps are seconds since the episode's start; "
                              "/clock carries it")
-        self.writer = LogWriter(path, metadata=meta)
+        self.writer = writer if writer is not None else LogWriter(path, metadata=meta)
         self.path = self.writer.path
         self.world = episode.world
         self.planner = getattr(episode, "planner", None)

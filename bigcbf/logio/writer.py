@@ -57,6 +57,16 @@ TOPIC_PLAN = "/plan"
 TOPIC_CANDIDATES = "/plan/candidates"
 TOPIC_INFLATED = "/cbf/inflated_radius"
 
+#: every topic an episode log has, and its type (bigcbf.logio.episode_log writes them)
+EPISODE_TOPICS = {
+    TOPIC_TF_STATIC: msgdefs.TF_MESSAGE, TOPIC_ROBOT_DESCRIPTION: msgdefs.STRING, TOPIC_GOAL: msgdefs.POSE_STAMPED,
+    TOPIC_CLOCK: msgdefs.CLOCK, TOPIC_TF: msgdefs.TF_MESSAGE, TOPIC_CMD: msgdefs.TWIST, TOPIC_CMD_IN: msgdefs.TWIST,
+    TOPIC_ODOM: msgdefs.ODOMETRY, TOPIC_GROUND_TRUTH: msgdefs.ODOMETRY, TOPIC_IMU: msgdefs.IMU,
+    TOPIC_BEHAVIOR: msgdefs.STRING, TOPIC_PLAN: msgdefs.PATH, TOPIC_CANDIDATES: msgdefs.MARKER_ARRAY,
+    TOPIC_SCAN: msgdefs.LASER_SCAN, TOPIC_OBSTACLES: msgdefs.MARKER_ARRAY,
+    TOPIC_OBSTACLE_STATES: msgdefs.TRACKED_OBSTACLE_ARRAY, TOPIC_INFLATED: msgdefs.MARKER_ARRAY,
+}
+
 #: rosbag2's record of a latched publisher's QoS (reliable, transient local, keep last 1)
 LATCHED_QOS = """- history: 1
   depth: 1
