@@ -104,7 +104,7 @@ class NavigationEnv(gym.Env):
             from .sim.render import Renderer
             from .video import Overlay
             self._renderer = Renderer(ep.world.model, self.width, self.height)
-            self._overlay = Overlay(ep, self._renderer, self.camera, title="agent")
+            self._overlay = Overlay(ep, self._renderer, self.camera, title="agent", legend="box")   # (H, W) frames
         self._dist = self._goal_dist()
         return self._obs(), self._info()
 

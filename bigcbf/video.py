@@ -1,6 +1,6 @@
 """Episode videos: an observer that renders each control step with overlays, and side-by-side composition.
 
-What a frame shows (the legend in its lower right corner names each item present):
+What a frame shows (the legend in a band below the scene names each item present):
 
 - the robot: in the top view a white disc with its heading (drawn at least 9 pixels in radius, so it is seen in a
   whole-scene view) and its footprint r_R; in the track view the model itself and its footprint;
@@ -25,7 +25,7 @@ import numpy as np
 
 from .episode import Episode, StepRecord
 from .sim.render import (Renderer, VideoWriter, add_arrow, add_disc, add_points, add_polyline, add_ring, draw_legend,
-                         meters_per_pixel, project, put_label, put_text)
+                         meters_per_pixel, project, put_label, put_text, with_legend_strip)
 
 CBF_ACTIVE_RGB = (255, 90, 60)
 
@@ -55,8 +55,10 @@ class Overlay:
     """Draws one control step of an episode into a frame of one camera: the scene overlays, track ids, the legend
     and the text. Shared by :class:`EpisodeVideo` and the Gymnasium environment's ``render()``."""
 
-    def __init__(self, episode: Episode, renderer: Renderer, camera: str = "top", title: str | None = None):
+    def __init__(self, episode: Episode, renderer: Renderer, camera: str = "top", title: str | None = None,
+                 legend: str = "strip"):
         self.ep, self.renderer, self.camera = episode, renderer, camera
+        self.legend_style = legend      # "strip": a band below the frame; "box": inside it, lower right; "none"
         self.title = title or episode.method or "external"
         self.mpp = meters_per_pixel(episode.world.model, camera, renderer.height)   # None: perspective (track)
         self.trail: list[tuple[float, float]] = []
@@ -153,9 +155,13 @@ class Overlay:
         put_text(frame, [f"{self.title}   t = {rec.t:5.2f} s",
                          f"mode {rec.mode}   speed {speed:.2f} m/s",
                          "CBF ACTIVE" if rec.cbf_active else "CBF idle"])
-        draw_legend(frame, self.legend(img is not None, rec.path is not None))
         if rec.cbf_active:
             frame[-8:, :] = CBF_ACTIVE_RGB
+        items = self.legend(img is not None, rec.path is not None)
+        if self.legend_style == "strip":
+            return with_legend_strip(frame, items)
+        if self.legend_style == "box":
+            draw_legend(frame, items)
         return frame
 
     def legend(self, imagination: bool, path: bool) -> list[tuple[str, tuple, str]]:

@@ -175,21 +175,53 @@ def draw_legend(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], corn
     cv2.addWeighted(overlay, 0.75, frame, 0.25, 0, dst=frame)
     for k, (label, rgba, kind) in enumerate(items):
         yc = y0 + 4 + line_h * k + line_h // 2
-        col = tuple(int(255 * c) for c in rgba[:3])
-        sx = x0 + 6
-        if kind == "dot":
-            cv2.circle(frame, (sx + 10, yc), 4, col, -1, cv2.LINE_AA)
-        elif kind == "ring":
-            cv2.circle(frame, (sx + 10, yc), 7, col, 1, cv2.LINE_AA)
-        elif kind == "arrow":
-            cv2.arrowedLine(frame, (sx, yc), (sx + 22, yc), col, 2, cv2.LINE_AA, tipLength=0.4)
-        elif kind == "disc":
-            cv2.circle(frame, (sx + 10, yc), 6, col, -1, cv2.LINE_AA)
-        else:
-            cv2.line(frame, (sx, yc), (sx + 22, yc), col, 3 if kind == "thick" else 1, cv2.LINE_AA)
+        _swatch(frame, kind, x0 + 6, yc, tuple(int(255 * c) for c in rgba[:3]))
         cv2.putText(frame, label, (x0 + 34, yc + sizes[k][1] // 2), cv2.FONT_HERSHEY_SIMPLEX, scale,
                     (235, 235, 235), 1, cv2.LINE_AA)
     return frame
+
+
+def _swatch(img: np.ndarray, kind: str, x: int, yc: int, col) -> None:
+    if kind == "dot":
+        cv2.circle(img, (x + 10, yc), 4, col, -1, cv2.LINE_AA)
+    elif kind == "ring":
+        cv2.circle(img, (x + 10, yc), 7, col, 1, cv2.LINE_AA)
+    elif kind == "arrow":
+        cv2.arrowedLine(img, (x, yc), (x + 22, yc), col, 2, cv2.LINE_AA, tipLength=0.4)
+    elif kind == "disc":
+        cv2.circle(img, (x + 10, yc), 6, col, -1, cv2.LINE_AA)
+    else:
+        cv2.line(img, (x, yc), (x + 22, yc), col, 3 if kind == "thick" else 1, cv2.LINE_AA)
+
+
+def with_legend_strip(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], scale: float = 0.4,
+                      multiple: int = 16) -> np.ndarray:
+    """The frame with a legend band below it (so the legend never hides the scene): the items (label, rgba in
+    [0, 1], kind as in :func:`draw_legend`) flow left to right in rows; the band's height makes the frame's height
+    a multiple of ``multiple`` (H.264 macroblocks)."""
+    items = list(items)
+    h, w = frame.shape[:2]
+    sizes = [cv2.getTextSize(lab, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0] for lab, _, _ in items]
+    row_h = max((s[1] for s in sizes), default=10) + 10
+    rows, x = [[]], 8
+    for k, (tw, _) in enumerate(sizes):
+        item_w = 30 + tw + 16
+        if x + item_w > w and rows[-1]:
+            rows.append([])
+            x = 8
+        rows[-1].append((k, x))
+        x += item_w
+    band_h = len(rows) * row_h + 8
+    band_h += (-(h + band_h)) % multiple
+    band = np.full((band_h, w, 3), 24, np.uint8)
+    for r, row in enumerate(rows):
+        yc = 4 + r * row_h + row_h // 2
+        for k, x0 in row:
+            label, rgba, kind = items[k]
+            _swatch(band, kind, x0, yc, tuple(int(255 * c) for c in rgba[:3]))
+            cv2.putText(band, label, (x0 + 30, yc + sizes[k][1] // 2), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                        (235, 235, 235), 1, cv2.LINE_AA)
+    return np.vstack([frame, band])
 
 
 def put_text(frame: np.ndarray, lines: Iterable[str], origin=(10, 24), scale: float = 0.55) -> np.ndarray:
