@@ -36,13 +36,6 @@ def stderr_note(text: str) -> None:
     print(f"note: {text}", file=sys.stderr)
 
 
-def load_params(path):
-    """The stack parameters of ``--profile`` (Table I without one), with a note on stderr for axes the calibration
-    did not identify (see :func:`bigcbf.api.load_config`)."""
-    from ..api import load_config
-    return load_config(None, path, notes=stderr_note).stack
-
-
 def start_live(port: int):
     """A LiveWriter on 127.0.0.1:port, announced on stderr; UserError without foxglove-sdk or with a busy port."""
     import sys
@@ -61,13 +54,6 @@ def start_live(port: int):
         raise UserError(f"--live: cannot serve on 127.0.0.1:{port} ({exc})") from None
     print(f"streaming to Foxglove on {live.url} (open a Foxglove WebSocket connection); real time", file=sys.stderr)
     return live
-
-
-def check_output(path: Path, what: str) -> None:
-    """Refuse to write where that would fail late or destroy something: a directory."""
-    from ..errors import UserError
-    if path.is_dir():
-        raise UserError(f"{what} path is a directory", file=str(path))
 
 
 def run(args) -> int:
