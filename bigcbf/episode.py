@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from .control.cbf import CbfFilter
+from .control.liveness import LivenessRecorder
 from .control.methods import METHODS
 from .control.metrics import cbf_energy
 from .params.perception import PerceptionParams
@@ -58,6 +59,11 @@ class EpisodeResult:
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
+    # chatter and stall (bigcbf/control/liveness.py defines them)
+    mode_switches_per_min: float = 0.0
+    side_reversals: int = 0         # left/right reversals of the mode history (PASS/SIDE -L vs -R)
+    lateral_reversals: int = 0      # left/right reversals of the command's lateral component (every method)
+    no_progress_s: float = 0.0      # time in 2 s windows that brought the robot < 0.1 m closer to the goal
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -144,6 +150,7 @@ class Episode:
         e_cbf, active, infeasible, n_ctrl, stopped = 0.0, 0, 0, 0, 0.0
         planner_ms, cbf_ms, percep_ms = [], [], []
         modes: list[tuple[float, str]] = []
+        live = LivenessRecorder(p.T_C_s)
         min_clear = np.inf
         collision = success = False
         obstacles, scan, scan_t = Obstacles.empty(), None, 0.0
@@ -179,6 +186,7 @@ class Episode:
                 if not modes or modes[-1][1] != pinfo.mode:
                     modes.append((round(w.t, 3), pinfo.mode))
                 ts = w.true_state()
+                live.add(w.t, state, u_safe, self.goal, (ts.px, ts.py))
                 if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
                     stopped += p.T_C_s
                 if self.observers:
@@ -209,7 +217,8 @@ class Episode:
             stopped_time_s=round(stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - wall0, control_steps=n_ctrl,
-            mode_history=modes, perception=self.perception_mode, warnings=w.warnings())
+            mode_history=modes, perception=self.perception_mode, warnings=w.warnings(),
+            **live.metrics(modes, w.t))
 
 
 def _p95(xs) -> float:
@@ -219,4 +228,5 @@ def _p95(xs) -> float:
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
-                      "mode_history")
+                      "mode_history", "mode_switches_per_min", "side_reversals", "lateral_reversals",
+                      "no_progress_s")

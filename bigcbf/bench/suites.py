@@ -35,6 +35,8 @@ class Suite:
     default_seeds: int = 50
     #: the stack parameters the suite is meant for (None: the default profile); ``--profile`` overrides it
     params: Callable[[], object] | None = None
+    #: the splits its entries belong to (``bigcbf bench --split NAME`` runs one); () for a suite without splits
+    splits: tuple[str, ...] = ()
 
 
 SUITES: Registry[Suite] = Registry("suite")
@@ -46,3 +48,13 @@ def _paper(out: Path) -> list[SuiteEntry]:
 
 
 SUITES.register("paper", Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
+
+
+def _generated(out: Path) -> list[SuiteEntry]:
+    from ..worlds import suite_worlds
+    return [SuiteEntry(str(path), split, family) for path, split, family in suite_worlds(out)]
+
+
+SUITES.register("generated", Suite(
+    "generated", "procedural worlds (bigcbf/worlds.py): 6 families x (30 dev + 30 test) worlds, written to "
+    "DIR/worlds/, one seed each", _generated, default_seeds=1, splits=("dev", "test")))

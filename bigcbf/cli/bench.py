@@ -18,6 +18,8 @@ def add_arguments(p):
                    help="the scenarios of a named suite (default paper: the nine of Table II)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
                    help="scenario names or .toml files instead of the suite's")
+    p.add_argument("--split", default=None, metavar="NAME",
+                   help="only the suite's scenarios of this split (generated: dev or test; default: all)")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
                        help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper)")
@@ -80,15 +82,32 @@ def config_from_args(args):
     methods = tuple(args.methods) if args.methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
     for m in methods:
         METHODS.get(m)
-    scenarios = (tuple(args.scenarios) if args.scenarios
-                 else tuple(str(e.scenario) for e in suite.entries(args.out)))
+    if args.split is not None:
+        if not suite.splits:
+            raise UserError(f"suite {args.suite!r} has no splits (--split is for suites such as generated)")
+        if args.split not in suite.splits:
+            raise UserError(f"suite {args.suite!r} has no split {args.split!r}; known: {', '.join(suite.splits)}")
+        if args.scenarios:
+            raise UserError("--split selects among the suite's scenarios; drop it when giving --scenarios")
     if args.profile is not None or suite.params is None:
         params = load_params(args.profile)
     else:
         params = suite.params()
+    entries = suite.entries(args.out)
+    if args.split is not None:
+        entries = [e for e in entries if e.split == args.split]
+    if args.scenarios:
+        scenarios = tuple(args.scenarios)
+        # scenarios given by path that are files of the suite keep their split and family in the reports
+        known = {Path(e.scenario).resolve(): e for e in entries if e.split or e.family}
+        labels = tuple((s, known[Path(s).resolve()].split, known[Path(s).resolve()].family) for s in scenarios
+                       if Path(s).resolve() in known)
+    else:
+        scenarios = tuple(str(e.scenario) for e in entries)
+        labels = tuple((str(e.scenario), e.split, e.family) for e in entries if e.split or e.family)
     return BenchConfig(out=args.out, methods=methods, scenarios=scenarios, seeds=seeds, workers=workers,
                        engine=args.engine, ray_address=args.ray_address, params=params,
-                       perception=args.perception)
+                       perception=args.perception, labels=labels)
 
 
 def run(args) -> int:
