@@ -294,8 +294,8 @@ def _family_sections(summary: dict, h: str) -> list[str]:
         n_worlds = {f: sum(g["split"] == split and g["family"] == f for g in groups.values()) for f in families}
         total = sum(n_worlds.values())
         lines += [f"{h}# Success per family (%), split {split}", "",
-                  f"{total} worlds ({', '.join(f'{f} {n}' for f, n in n_worlds.items())}); each cell: success % "
-                  "over the episodes that ran.", ""]
+                  f"{total} world{'s' if total != 1 else ''} ({', '.join(f'{f} {n}' for f, n in n_worlds.items())}); "
+                  "each cell: success % over the episodes that ran.", ""]
         lines += _table(["Method"] + families + ["all"],
                         ([display(m)] + [_f(fam[m][split][f]["success_pct"], 0) for f in families + ["all"]]
                          for m in methods))

@@ -30,8 +30,9 @@ class SuiteEntry:
 class Suite:
     name: str
     description: str
-    #: the suite's scenarios, given the bench's output directory (generated suites write their files there)
-    entries: Callable[[Path], list[SuiteEntry]]
+    #: the suite's scenarios, given the bench's output directory (generated suites write their files there);
+    #: a suite with splits takes the split to select as a second argument (None: every split)
+    entries: Callable[..., list[SuiteEntry]]
     default_seeds: int = 50
     #: the stack parameters the suite is meant for (None: the default profile); ``--profile`` overrides it
     params: Callable[[], object] | None = None
@@ -50,9 +51,10 @@ def _paper(out: Path) -> list[SuiteEntry]:
 SUITES.register("paper", Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
 
 
-def _generated(out: Path) -> list[SuiteEntry]:
+def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
     from ..worlds import suite_worlds
-    return [SuiteEntry(str(path), split, family) for path, split, family in suite_worlds(out)]
+    return [SuiteEntry(str(path), sp, family)
+            for path, sp, family in suite_worlds(out, None if split is None else [split])]
 
 
 SUITES.register("generated", Suite(

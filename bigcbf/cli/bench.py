@@ -93,9 +93,7 @@ def config_from_args(args):
         params = load_params(args.profile)
     else:
         params = suite.params()
-    entries = suite.entries(args.out)
-    if args.split is not None:
-        entries = [e for e in entries if e.split == args.split]
+    entries = suite.entries(args.out, args.split) if suite.splits else suite.entries(args.out)
     if args.scenarios:
         scenarios = tuple(args.scenarios)
         # scenarios given by path that are files of the suite keep their split and family in the reports
