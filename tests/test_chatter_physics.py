@@ -38,9 +38,6 @@ class Weaver:
         return u, PlanInfo("PASS-L" if left else "PASS-R", True, 0.0, None)
 
 
-if WEAVER not in METHODS:
-    METHODS.register(WEAVER, Weaver)
-
 OPEN_FLOOR = """name = "open_floor"
 description = "Open floor, nothing in the way."
 time_limit_s = 6.0
@@ -69,7 +66,8 @@ reactive = false
 """
 
 
-def test_a_planner_flipping_sides_every_second_counts_five_reversals_in_six_seconds(tmp_path):
+def test_a_planner_flipping_sides_every_second_counts_five_reversals_in_six_seconds(tmp_path, monkeypatch):
+    monkeypatch.setitem(METHODS._items, WEAVER, Weaver)       # registered for this test only
     f = tmp_path / "open_floor.toml"
     f.write_text(OPEN_FLOOR)
     res = Episode(load_scenario(f, 0), WEAVER, 0, SIMULATION).run()
