@@ -110,12 +110,13 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
 def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scenarios: Sequence[str] | None = None,
                  suite: str = "paper", seeds: int | Iterable[int] | None = None, workers: int | None = None,
                  engine: str = "local", ray_address: str | None = None, config: str | Path | RunConfig | None = None,
-                 profile: str | Path | None = None, perception: str = "lidar",
+                 profile: str | Path | None = None, perception: str = "lidar", split: str | None = None,
                  notes: Callable[[str], None] | None = None):
     """The :class:`bigcbf.bench.runner.BenchConfig` that :func:`run_bench` runs (what ``bigcbf bench`` builds from
     its options). ``seeds``: a count N (seeds 0..N-1) or the seeds themselves; default the suite's count.
-    ``methods``: default every registered method. ``scenarios``: default the suite's. The run configuration is
-    the suite's stack parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`)."""
+    ``methods``: default every registered method. ``scenarios``: default the suite's (``split``: only that split
+    of a suite that has splits, e.g. generated's dev or test). The run configuration is the suite's stack
+    parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`)."""
     import os
 
     from .bench.engines import ENGINES, ray_available
@@ -142,11 +143,27 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     for m in method_list:
         resolve_method(m)
     out = Path(out)
-    scenario_list = tuple(str(x) for x in scenarios) if scenarios else tuple(str(e.scenario) for e in s.entries(out))
+    if split is not None:
+        if not s.splits:
+            raise UserError(f"suite {suite!r} has no splits (--split is for suites such as generated)")
+        if split not in s.splits:
+            raise UserError(f"suite {suite!r} has no split {split!r}; known: {', '.join(s.splits)}")
+        if scenarios:
+            raise UserError("--split selects among the suite's scenarios; drop it when giving --scenarios")
+    entries = s.entries(out, split) if s.splits else s.entries(out)
+    if scenarios:
+        scenario_list = tuple(str(x) for x in scenarios)
+        # scenarios given by path that are files of the suite keep their split and family in the reports
+        known = {Path(e.scenario).resolve(): e for e in entries if e.split or e.family}
+        labels = tuple((x, known[Path(x).resolve()].split, known[Path(x).resolve()].family) for x in scenario_list
+                       if Path(x).resolve() in known)
+    else:
+        scenario_list = tuple(str(e.scenario) for e in entries)
+        labels = tuple((str(e.scenario), e.split, e.family) for e in entries if e.split or e.family)
     base = RunConfig(stack=s.params()) if s.params is not None else None
     cfg = load_config(config, profile, base=base, notes=notes)
     return BenchConfig(out=out, methods=method_list, scenarios=scenario_list, seeds=seed_list, workers=workers,
-                       engine=engine, ray_address=ray_address, config=cfg, perception=perception)
+                       engine=engine, ray_address=ray_address, config=cfg, perception=perception, labels=labels)
 
 
 def run_bench(out: str | Path, *, progress: bool | None = False, report_only: bool = False, **kwargs):

@@ -18,6 +18,7 @@ import numpy as np
 
 from .control.cbf import CbfFilter
 from .control.methods import make_planner
+from .control.liveness import LivenessRecorder
 from .control.metrics import cbf_energy
 from .control.planner import PlanInfo
 from .params.perception import PerceptionParams
@@ -61,6 +62,11 @@ class EpisodeResult:
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
+    # chatter and stall (bigcbf/control/liveness.py defines them)
+    mode_switches_per_min: float = 0.0
+    side_reversals: int = 0         # left/right reversals of the mode history (PASS/SIDE -L vs -R)
+    lateral_reversals: int = 0      # left/right reversals of the command's lateral component (every method)
+    no_progress_s: float = 0.0      # time in 2 s windows that brought the robot < 0.1 m closer to the goal
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -176,6 +182,7 @@ class Episode:
         self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
         self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
         self._modes: list[tuple[float, str]] = []
+        self._live = LivenessRecorder(self.params.T_C_s)
         self._min_clear = np.inf
         self._collision = self._success = False
         self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
@@ -245,6 +252,7 @@ class Episode:
         if not self._modes or self._modes[-1][1] != pinfo.mode:
             self._modes.append((round(w.t, 3), pinfo.mode))
         ts = w.true_state()
+        self._live.add(w.t, state, u_safe, self.goal, (ts.px, ts.py))
         if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
             self._stopped += p.T_C_s
         rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
@@ -284,7 +292,8 @@ class Episode:
             perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
-            mode_history=list(self._modes), perception=self.perception_mode, warnings=w.warnings())
+            mode_history=list(self._modes), perception=self.perception_mode, warnings=w.warnings(),
+            **self._live.metrics(self._modes, w.t))
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
@@ -301,4 +310,5 @@ def _p95(xs) -> float:
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
-                      "mode_history")
+                      "mode_history", "mode_switches_per_min", "side_reversals", "lateral_reversals",
+                      "no_progress_s")

@@ -11,6 +11,14 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``collisions``, ``timeouts``: counts.
 - ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
   (wall-clock figures: they depend on the machine and its load, unlike every other number here).
+- chatter and stall (defined in bigcbf/control/liveness.py), means over episodes: ``mode_switches_per_min``,
+  ``side_reversals`` (left/right reversals of the mode history), ``lateral_reversals`` (of the command's lateral
+  component; every method), ``no_progress_s`` (time in 2 s windows with < 0.1 m progress toward the goal),
+  ``stopped_time_s``. Rows recorded before these metrics existed are left out of their means.
+
+Suites with splits and families (``generated``) also get ``by_family``: the same figures per method, split and
+family (and over each split, key ``all``), a success table per family in summary.md and a heatmap of method x
+family and split instead of method x scenario.
 """
 from __future__ import annotations
 
@@ -60,14 +68,53 @@ def summarize(rows: Iterable[dict]) -> dict:
         "cbf_p95_ms": _mean([m["cbf_p95_ms"] for m in ok]),
         "perception_p95_ms": _mean([m["perception_p95_ms"] for m in ok]),
         "stopped_time_s": _mean([m["stopped_time_s"] for m in ok]),
+        **{k: _mean([m.get(k) for m in ok]) for k in LIVENESS_KEYS},
     }
 
 
+#: the per-episode chatter and stall metrics (EpisodeResult) averaged in ``summarize``
+LIVENESS_KEYS = ("mode_switches_per_min", "side_reversals", "lateral_reversals", "no_progress_s")
+
+
+def _family_order(scenarios: Sequence[str], groups: dict) -> tuple[list[str], list[str]]:
+    """Splits and families in the order of their first scenario."""
+    splits, families = [], []
+    for s in scenarios:
+        g = groups.get(s)
+        if g is None:
+            continue
+        if g["split"] not in splits:
+            splits.append(g["split"])
+        if g["family"] not in families:
+            families.append(g["family"])
+    return splits, families
+
+
+def by_family(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], groups: dict) -> dict:
+    """{method: {split: {family: summary, "all": summary}}} over the scenarios that have a group."""
+    splits, families = _family_order(scenarios, groups)
+    out: dict = {}
+    for m in methods:
+        out[m] = {}
+        for sp in splits:
+            mine = [r for r in rows if r["method"] == m and groups.get(r["scenario"], {}).get("split") == sp]
+            out[m][sp] = {f: summarize(r for r in mine if groups[r["scenario"]]["family"] == f) for f in families
+                          if any(groups[s]["family"] == f and groups[s]["split"] == sp for s in scenarios
+                                 if s in groups)}
+            out[m][sp]["all"] = summarize(mine)
+    return out
+
+
 def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], seeds: Sequence[int],
-                  info: dict | None = None) -> dict:
-    """summary.json's content: figures keyed by method and by method then scenario, the paper's, and errors."""
+                  info: dict | None = None, groups: dict | None = None) -> dict:
+    """summary.json's content: figures keyed by method and by method then scenario, the paper's, and errors;
+    with ``groups`` (scenario -> {"split", "family"}) also by method, split and family."""
     by_m = {m: [r for r in rows if r["method"] == m] for m in methods}
     versions = sorted({r["code_sha"] for r in rows if r["status"] == "ok" and r.get("code_sha")})
+    extra = {}
+    if groups:
+        groups = {s: g for s, g in groups.items() if s in scenarios}
+        extra = {"groups": groups, "by_family": by_family(rows, methods, scenarios, groups)}
     return {
         "bench": {**(info or {}), "methods": list(methods), "scenarios": list(scenarios), "seeds": list(seeds),
                   "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),
@@ -80,19 +127,23 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
                   "scenario_success_pct": PAPER_SCENARIO_SUCCESS},
         "error_episodes": [{k: r[k] for k in ("scenario", "method", "seed", "error")}
                            for r in rows if r["status"] == "error"],
+        **extra,
     }
 
 
 # --- episodes.csv --------------------------------------------------------------------------------------------------
 
-def write_csv(rows: Sequence[dict], path: Path) -> None:
-    """Every metric of every episode, one line each; lists and dicts (mode_history, warnings) as JSON text."""
+def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None) -> None:
+    """Every metric of every episode, one line each; lists and dicts (mode_history, warnings) as JSON text; with
+    ``groups``, each scenario's split and family after the key columns."""
     metric_cols: list[str] = []
     for r in rows:
         for k in r["metrics"] or {}:
             if k not in metric_cols and k not in KEY_FIELDS:
                 metric_cols.append(k)
-    cols = list(KEY_FIELDS) + ["status", "error"] + metric_cols + ["worker_wall_s", "host", "code_sha", "attempts"]
+    labels = ["split", "family"] if groups else []
+    cols = (list(KEY_FIELDS) + labels + ["status", "error"] + metric_cols
+            + ["worker_wall_s", "host", "code_sha", "attempts"])
     with Path(path).open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
@@ -100,7 +151,10 @@ def write_csv(rows: Sequence[dict], path: Path) -> None:
             m = r["metrics"] or {}
             line = []
             for c in cols:
-                v = m.get(c) if c in metric_cols else r.get(c)
+                if c in labels:
+                    v = (groups.get(r["scenario"]) or {}).get(c)
+                else:
+                    v = m.get(c) if c in metric_cols else r.get(c)
                 line.append(json.dumps(v) if isinstance(v, (list, dict)) else ("" if v is None else v))
             w.writerow(line)
 
@@ -168,12 +222,23 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                       _f(s["planner_p95_ms"])] for m in methods for s in [per_m[m]]))
     lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (Eq. (20)): means over episodes. Active, "
               "QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time.", ""]
-    lines += [f"{h}# Success per scenario (%)", ""]
-    lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
-                    ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
-    lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
-              f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
+    lines += [f"{h}# Chatter and stall", ""]
+    lines += _liveness_table(methods, [per_m[m] for m in methods], first="Method")
+    lines += ["", LIVENESS_NOTE, ""]
+    fam = summary.get("by_family")
+    if fam:
+        lines += _family_sections(summary, h)
+        lines += [f"![success rate per method, family and split]({image_dir}success_heatmap.png)", "",
+                  f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
+    else:
+        lines += [f"{h}# Success per scenario (%)", ""]
+        lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
+                        ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
+        lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
+                  f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
     paper = summary["paper"]["table_ii"]
+    if fam:     # procedural worlds: the paper's Table II is about its nine scenes, not these
+        return _errors_section(summary, h, lines)
     lines += [f"{h}# Ours beside the paper's Table II", "",
               "Each pair is ours / the paper's (the paper: 450 episodes per method, its own simulator; collisions and "
               "planner P95 from its text; – where the paper gives no number).", ""]
@@ -190,6 +255,10 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
         lines += _table(["Method"] + [s.replace("_", " ") for s in quoted],
                         ([display(m)] + [f"{_f(per_ms[m][s]['success_pct'], 0)} / {_f(pss[s].get(m), 0)}"
                                          for s in quoted] for m in methods))
+    return _errors_section(summary, h, lines)
+
+
+def _errors_section(summary: dict, h: str, lines: list[str]) -> str:
     errs = summary["error_episodes"]
     if errs:
         lines += ["", f"{h}# Episodes that crashed", ""]
@@ -197,6 +266,51 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
         if len(errs) > 50:
             lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
     return "\n".join(lines) + "\n"
+
+
+LIVENESS_NOTE = ("Means over episodes (bigcbf/control/liveness.py): mode switches per minute; left/right reversals "
+                 "of the mode history (PASS/SIDE-L vs -R, through any neutral modes; 0 for methods without sided "
+                 "modes) and of the command's lateral component relative to the goal direction (every method; "
+                 "0.1 m/s dead band, a side counts once held 0.25 s); time in 2 s windows that brought the robot "
+                 "less than 0.1 m closer to the goal; time below the freeze speed.")
+
+
+def _liveness_table(labels: Sequence[str], stats: Sequence[dict], first: str) -> list[str]:
+    return _table([first, "Episodes", "Switches/min", "Reversals (modes)", "Reversals (command)",
+                   "No progress (s)", "Stopped (s)"],
+                  ([display(lab), str(s["ok"]), _f(s["mode_switches_per_min"], 1), _f(s["side_reversals"]),
+                    _f(s["lateral_reversals"]), _f(s["no_progress_s"], 1), _f(s["stopped_time_s"], 1)]
+                   for lab, s in zip(labels, stats)))
+
+
+def _family_sections(summary: dict, h: str) -> list[str]:
+    """Success per family for each split, then every figure per method and family."""
+    fam = summary["by_family"]
+    methods = summary["bench"]["methods"]
+    groups = summary["groups"]
+    lines = []
+    for split in fam[methods[0]]:
+        families = [f for f in fam[methods[0]][split] if f != "all"]
+        n_worlds = {f: sum(g["split"] == split and g["family"] == f for g in groups.values()) for f in families}
+        total = sum(n_worlds.values())
+        lines += [f"{h}# Success per family (%), split {split}", "",
+                  f"{total} world{'s' if total != 1 else ''} ({', '.join(f'{f} {n}' for f, n in n_worlds.items())}); "
+                  "each cell: success % over the episodes that ran.", ""]
+        lines += _table(["Method"] + families + ["all"],
+                        ([display(m)] + [_f(fam[m][split][f]["success_pct"], 0) for f in families + ["all"]]
+                         for m in methods))
+        lines += ["", f"{h}# Per family, split {split}", ""]
+        head = ["Method", "Family", "Episodes", "Success (%)", "Collisions", "Timeouts", "Time (s)",
+                "Switches/min", "Reversals (modes)", "Reversals (command)", "No progress (s)"]
+        body = []
+        for m in methods:
+            for f in families + ["all"]:
+                s = fam[m][split][f]
+                body.append([display(m), f, str(s["ok"]), _f(s["success_pct"], 1), _f(s["collisions"]),
+                             _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["mode_switches_per_min"], 1),
+                             _f(s["side_reversals"]), _f(s["lateral_reversals"]), _f(s["no_progress_s"], 1)])
+        lines += _table(head, body, align="ll" + "r" * (len(head) - 2)) + [""]
+    return lines
 
 
 # --- figures -------------------------------------------------------------------------------------------------------
@@ -209,8 +323,15 @@ def plot_heatmap(summary: dict, path: Path) -> None:
     import numpy as np
 
     methods, scenarios = summary["bench"]["methods"], summary["bench"]["scenarios"]
-    z = np.array([[np.nan if (v := summary["by_scenario"][m][s]["success_pct"]) is None else v for s in scenarios]
-                  for m in methods], float)
+    fam = summary.get("by_family")
+    if fam:     # columns: family and split
+        cols = [(sp, f) for sp in fam[methods[0]] for f in fam[methods[0]][sp] if f != "all"]
+        z = np.array([[np.nan if (v := fam[m][sp][f]["success_pct"]) is None else v for sp, f in cols]
+                      for m in methods], float)
+        scenarios = [f"{f}_({sp})" for sp, f in cols]
+    else:
+        z = np.array([[np.nan if (v := summary["by_scenario"][m][s]["success_pct"]) is None else v
+                       for s in scenarios] for m in methods], float)
     fig, ax = plt.subplots(figsize=(max(6.5, 2.2 + 1.05 * len(scenarios)), 1.6 + 0.5 * len(methods)), dpi=150)
     im = ax.imshow(z, cmap="RdYlGn", vmin=0, vmax=100, aspect="auto")
     for i in range(len(methods)):
@@ -222,8 +343,12 @@ def plot_heatmap(summary: dict, path: Path) -> None:
     ax.set_yticks(range(len(methods)), [display(m) for m in methods], fontsize=9)
     ax.tick_params(length=0)
     n = len(summary["bench"]["seeds"])
-    ax.set_title(f"Success rate (%) per method and scenario\n({n} seed{'s' if n != 1 else ''} each, paired)",
-                 fontsize=10)
+    if fam:
+        ax.set_title(f"Success rate (%) per method, family and split\n({n} seed{'s' if n != 1 else ''} per world, "
+                     "paired)", fontsize=10)
+    else:
+        ax.set_title(f"Success rate (%) per method and scenario\n({n} seed{'s' if n != 1 else ''} each, paired)",
+                     fontsize=10)
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.02, label="success (%)")
     fig.tight_layout()
     fig.savefig(path)
@@ -270,11 +395,12 @@ def plot_burden(summary: dict, path: Path) -> None:
 # --- everything at once --------------------------------------------------------------------------------------------
 
 def write_reports(out: Path, rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str],
-                  seeds: Sequence[int], info: dict | None = None) -> dict:
-    """Write episodes.csv, summary.json, summary.md and the two figures into ``out``; return the summary."""
+                  seeds: Sequence[int], info: dict | None = None, groups: dict | None = None) -> dict:
+    """Write episodes.csv, summary.json, summary.md and the two figures into ``out``; return the summary.
+    ``groups``: scenario name -> {"split", "family"} (suites with splits)."""
     out = Path(out)
-    summary = build_summary(rows, methods, scenarios, seeds, info)
-    write_csv(rows, out / "episodes.csv")
+    summary = build_summary(rows, methods, scenarios, seeds, info, groups)
+    write_csv(rows, out / "episodes.csv", groups)
     write_json(summary, out / "summary.json")
     (out / "summary.md").write_text(summary_markdown(summary))
     plot_heatmap(summary, out / "success_heatmap.png")

@@ -36,6 +36,9 @@ class BenchConfig:
     ray_address: str | None = None
     config: object = None                 # RunConfig (bigcbf.config; default: Table I and every default)
     perception: str = "lidar"
+    #: (scenario as given in ``scenarios``, split, family) for the scenarios of a suite with splits/families;
+    #: the reports give success per family and split for them
+    labels: tuple[tuple[str, str, str], ...] = ()
 
 
 @dataclass
@@ -104,6 +107,15 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
                          params_hash=phash, params_toml=ptoml, perception=config.perception)
              for seed in config.seeds for n in names for m in methods]
     return tasks, methods, names
+
+
+def _groups(config: BenchConfig) -> dict[str, dict[str, str]] | None:
+    """Scenario name -> {"split", "family"} from the config's labels (None without labels)."""
+    if not config.labels:
+        return None
+    from ..scenario import load_scenario, resolve_path
+    return {load_scenario(resolve_path(s), config.seeds[0]).name: {"split": split, "family": family}
+            for s, split, family in config.labels}
 
 
 class _DirLock:
@@ -192,7 +204,8 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
         if runs:   # over every invocation that ran episodes of these parameters (a resumed bench has several)
             n, w = sum(r["episodes_run"] for r in runs), sum(r["wall_time_s"] for r in runs)
             info.update(runs=len(runs), wall_time_s=round(w, 1), episodes_per_min=round(60.0 * n / w, 2) if w else None)
-        summary = report.write_reports(out, rows, methods, scenarios, list(config.seeds), info)
+        summary = report.write_reports(out, rows, methods, scenarios, list(config.seeds), info,
+                                       groups=_groups(config))
     finally:
         lock.release()
     outcome = BenchOutcome(total=len(tasks), already_done=already, ran=ran,

@@ -30,11 +30,14 @@ class SuiteEntry:
 class Suite:
     name: str
     description: str
-    #: the suite's scenarios, given the bench's output directory (generated suites write their files there)
-    entries: Callable[[Path], list[SuiteEntry]]
+    #: the suite's scenarios, given the bench's output directory (generated suites write their files there);
+    #: a suite with splits takes the split to select as a second argument (None: every split)
+    entries: Callable[..., list[SuiteEntry]]
     default_seeds: int = 50
     #: the stack parameters the suite is meant for (None: the default profile); ``--profile`` overrides it
     params: Callable[[], object] | None = None
+    #: the splits its entries belong to (``bigcbf bench --split NAME`` runs one); () for a suite without splits
+    splits: tuple[str, ...] = ()
 
 
 SUITES: Registry[Suite] = Registry("suite")
@@ -46,3 +49,14 @@ def _paper(out: Path) -> list[SuiteEntry]:
 
 
 SUITES.register("paper", Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
+
+
+def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
+    from ..worlds import suite_worlds
+    return [SuiteEntry(str(path), sp, family)
+            for path, sp, family in suite_worlds(out, None if split is None else [split])]
+
+
+SUITES.register("generated", Suite(
+    "generated", "procedural worlds (bigcbf/worlds.py): 6 families x (30 dev + 30 test) worlds, written to "
+    "DIR/worlds/, one seed each", _generated, default_seeds=1, splits=("dev", "test")))

@@ -18,6 +18,8 @@ def add_arguments(p):
                    help="the scenarios of a named suite (default paper: the nine of Table II)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
                    help="scenario names or .toml files instead of the suite's")
+    p.add_argument("--split", default=None, metavar="NAME",
+                   help="only the suite's scenarios of this split (generated: dev or test; default: all)")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
                        help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper)")
@@ -71,7 +73,8 @@ def config_from_args(args):
     workers = None if args.workers is None else _int(args.workers, "--workers", 1)
     return bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
                         workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
-                        profile=args.profile, perception=args.perception, notes=stderr_note)
+                        profile=args.profile, perception=args.perception, split=args.split,
+                        notes=stderr_note)
 
 
 def run(args) -> int:
