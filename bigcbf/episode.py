@@ -86,7 +86,7 @@ class Episode:
 
     def __init__(self, scenario: Scenario, method: str, seed: int, params: StackParams = SIMULATION,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
-                 lidar: LidarConfig = LidarConfig(), time_limit_s: float | None = None):
+                 lidar: LidarConfig | None = None, time_limit_s: float | None = None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params

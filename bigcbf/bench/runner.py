@@ -18,7 +18,7 @@ from typing import Callable
 from ..errors import UserError
 from . import engines, report
 from .store import ResultStore
-from .tasks import EpisodeTask, params_key, params_toml, run_episode, text_sha
+from .tasks import EpisodeTask, params_key, params_toml, run_episode, scenario_key
 
 DB_NAME = "results.sqlite"
 OUTPUTS = ("results.sqlite", "episodes.csv", "summary.json", "summary.md") + report.FIGURES
@@ -61,7 +61,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     from ..control.methods import METHODS
     from ..episode import PERCEPTION_MODES
     from ..params.stack import SIMULATION
-    from ..scenario import load_scenario, resolve_path
+    from ..scenario import base_profile_text, load_scenario, resolve_path
 
     if not config.methods:
         raise UserError("no methods given")
@@ -86,22 +86,24 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     ptoml = params_toml(config.params if config.params is not None else SIMULATION)
     phash = params_key(ptoml, config.perception)
 
-    scen: dict[str, tuple[str, str]] = {}          # name -> (sha, text)
+    scen: dict[str, tuple[str, str, str]] = {}     # name -> (key, text, base robot profile's text)
     for s in config.scenarios:
         path = resolve_path(s)
         try:
             text = path.read_text()
         except (OSError, UnicodeDecodeError) as exc:
             raise UserError(f"cannot read the scenario file ({exc})", file=str(path)) from None
+        _, profile_text = base_profile_text(path)
         name = None
         for seed in config.seeds:        # every seed's draw must be valid before we start
-            name = load_scenario(path, seed).name
+            name = load_scenario(path, seed, robot_profile_text=profile_text).name
         if name in scen:
             raise UserError(f"two scenarios are named {name!r}; a bench needs distinct names", file=str(path))
-        scen[name] = (text_sha(text), text)
+        scen[name] = (scenario_key(text, profile_text), text, profile_text)
     methods, names = report.default_order(config.methods, scen)
     tasks = [EpisodeTask(scenario=n, scenario_sha=scen[n][0], scenario_toml=scen[n][1], method=m, seed=int(seed),
-                         params_hash=phash, params_toml=ptoml, perception=config.perception)
+                         params_hash=phash, params_toml=ptoml, perception=config.perception,
+                         robot_profile_toml=scen[n][2])
              for seed in config.seeds for n in names for m in methods]
     return tasks, methods, names
 
