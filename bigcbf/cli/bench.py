@@ -29,7 +29,8 @@ def add_arguments(p):
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray instance")
     p.add_argument("--profile", type=Path, default=None,
-                   help="stack parameters / uncertainty profile TOML (default: Table I); part of the episode key")
+                   help="stack parameters / uncertainty profile TOML (default: the suite's; for paper, Table I with "
+                        "the twin-calibrated profile of the simulated X3); part of the episode key")
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",

@@ -14,7 +14,8 @@ def add_arguments(p):
     p.add_argument("--method", default="big-cbf", help="planner (default big-cbf); see 'bigcbf methods'")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
     p.add_argument("--profile", type=Path, default=None,
-                   help="stack parameters / calibrated uncertainty profile TOML (default: Table I)")
+                   help="stack parameters / calibrated uncertainty profile TOML (default: Table I with the "
+                        "twin-calibrated profile of the simulated X3, bigcbf/profiles/stack/x3_sim.toml)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
     p.add_argument("--video", type=Path, default=None, help="write an H.264 MP4 of the episode")
@@ -24,14 +25,16 @@ def add_arguments(p):
 
 
 def load_params(path):
-    """The stack parameters of ``--profile`` (Table I without one). A calibrated profile whose translational axes
-    were not identified by the calibration gets a note on stderr: the behaviors command vx and vy, and for an
-    unidentified axis the profile holds the nominal model, not a measurement."""
+    """The stack parameters of ``--profile`` (Table I overlaid with it); without one, Table I overlaid with the
+    stack profile the twin calibrated for the simulated X3 (``default_stack_params``: tau95 and the execution
+    model). A calibrated profile whose translational axes were not identified by the calibration gets a note on
+    stderr: the behaviors command vx and vy, and for an unidentified axis the profile holds the nominal model,
+    not a measurement."""
     import sys
 
-    from ..params.stack import SIMULATION, load_stack_params
+    from ..params.stack import default_stack_params, load_stack_params
     if path is None:
-        return SIMULATION
+        return default_stack_params()
     params = load_stack_params(path)
     missing = [a for a, ok in zip(("vx", "vy", "wz"), params.uncertainty.execution.identified[:2]) if not ok]
     if missing:
