@@ -18,7 +18,7 @@ import numpy as np
 
 from .control.cbf import CbfFilter
 from .control.methods import METHODS
-from .control.metrics import cbf_energy
+from .control.metrics import cbf_energy, margin_stats
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
@@ -58,6 +58,15 @@ class EpisodeResult:
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
+    # the shared-uncertainty ablation's diagnostics (Sec. IV-C): E_CBF of the steps whose QP was infeasible, and the
+    # margins kappa_l m_i (Eq. 14) each layer used, mean and 90th percentile over the episode [m]: the imagination's
+    # over the selected rollout's steps and obstacles at each selection (BIG-CBF variants; NoShared: its fixed
+    # margin; None for methods without imagination), the execution layer's over the CBF rows at each control step
+    e_cbf_infeasible: float = 0.0
+    m_img_mean_m: float | None = None
+    m_img_p90_m: float | None = None
+    m_exec_mean_m: float | None = None
+    m_exec_p90_m: float | None = None
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -141,7 +150,9 @@ class Episode:
         wall0 = time.perf_counter()
         steps_per_control = int(round(p.T_C_s / w.dt))
         steps_per_scan = int(round(1.0 / w.lidar.config.rate_hz / w.dt))
-        e_cbf, active, infeasible, n_ctrl, stopped = 0.0, 0, 0, 0, 0.0
+        e_cbf, active, infeasible, n_ctrl, stopped, e_cbf_inf = 0.0, 0, 0, 0, 0.0, 0.0
+        margins_img: list[np.ndarray] = []
+        margins_exec: list[np.ndarray] = []
         planner_ms, cbf_ms, percep_ms = [], [], []
         modes: list[tuple[float, str]] = []
         min_clear = np.inf
@@ -172,9 +183,15 @@ class Episode:
                 if pinfo.planned:
                     planner_ms.append(pinfo.planner_ms)
                 cbf_ms.append(finfo.solve_ms)
-                e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
+                e_step = cbf_energy(u_safe, u_in, p.R_u_diag)
+                e_cbf += e_step
                 active += bool(finfo.active)
                 infeasible += bool(finfo.infeasible)
+                if finfo.infeasible:
+                    e_cbf_inf += e_step
+                margins_exec.append(finfo.margins)
+                if pinfo.margins_img is not None:
+                    margins_img.append(pinfo.margins_img)
                 n_ctrl += 1
                 if not modes or modes[-1][1] != pinfo.mode:
                     modes.append((round(w.t, 3), pinfo.mode))
@@ -200,6 +217,8 @@ class Episode:
             if collision:
                 break
         ts = w.true_state()
+        m_img = margin_stats(np.concatenate(margins_img)) if margins_img else (None, None)
+        m_exec = margin_stats(np.concatenate(margins_exec)) if margins_exec else (None, None)
         return EpisodeResult(
             scenario=self.scenario.name, method=self.method, seed=self.seed, success=success,
             collision=collision, timeout=not (success or collision), time_s=round(w.t, 4),
@@ -209,7 +228,9 @@ class Episode:
             stopped_time_s=round(stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - wall0, control_steps=n_ctrl,
-            mode_history=modes, perception=self.perception_mode, warnings=w.warnings())
+            mode_history=modes, perception=self.perception_mode, warnings=w.warnings(),
+            e_cbf_infeasible=e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
+            m_exec_p90_m=m_exec[1])
 
 
 def _p95(xs) -> float:
@@ -219,4 +240,5 @@ def _p95(xs) -> float:
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
-                      "mode_history")
+                      "mode_history", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m", "m_exec_mean_m",
+                      "m_exec_p90_m")

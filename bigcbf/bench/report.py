@@ -8,6 +8,13 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``e_cbf``: mean over episodes of E_CBF, Eq. (20) (a per-episode sum, as in the paper).
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
   over all control steps of all episodes of the group (the paper's "fraction of control steps").
+- ``cbf_active_episode_pct``: the mean over episodes of each episode's active ratio, x 100 (a long episode, e.g. a
+  stalled timeout at 0 %, weighs as much as a short one; the pooled figure weighs episodes by their length).
+- ``e_cbf_infeasible_share_pct``: 100 x the E_CBF of control steps whose QP was infeasible / all E_CBF, summed over
+  the group's episodes (``None`` when E_CBF is 0).
+- ``m_img_mean_m``, ``m_img_p90_m``, ``m_exec_mean_m``, ``m_exec_p90_m``: the margins kappa_l m_i (Eq. 14) of each
+  layer: the mean over episodes of each episode's mean and of each episode's 90th percentile (episode metrics of
+  the same names; the imagination's only for methods that imagine, ``None`` otherwise).
 - ``collisions``, ``timeouts``: counts.
 - ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
   (wall-clock figures: they depend on the machine and its load, unlike every other number here).
@@ -60,7 +67,21 @@ def summarize(rows: Iterable[dict]) -> dict:
         "cbf_p95_ms": _mean([m["cbf_p95_ms"] for m in ok]),
         "perception_p95_ms": _mean([m["perception_p95_ms"] for m in ok]),
         "stopped_time_s": _mean([m["stopped_time_s"] for m in ok]),
+        "cbf_active_episode_pct": (100.0 * _mean([m["cbf_active_ratio"] for m in ok])) if n else None,
+        "e_cbf_infeasible_share_pct": _share([m.get("e_cbf_infeasible") for m in ok], [m["e_cbf"] for m in ok]),
+        **{k: _mean([m.get(k) for m in ok]) for k in MARGIN_KEYS},
     }
+
+
+#: the per-episode margin metrics (EpisodeResult) averaged over episodes in the summary
+MARGIN_KEYS = ("m_img_mean_m", "m_img_p90_m", "m_exec_mean_m", "m_exec_p90_m")
+
+
+def _share(part: Sequence[float | None], whole: Sequence[float]) -> float | None:
+    """100 x sum(part) / sum(whole) over the episodes that report ``part`` (None when that sum of whole is 0)."""
+    pairs = [(p, w) for p, w in zip(part, whole) if p is not None and w is not None and math.isfinite(w)]
+    total = sum(w for _, w in pairs)
+    return 100.0 * sum(p for p, _ in pairs) / total if total > 0 else None
 
 
 def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], seeds: Sequence[int],
@@ -168,7 +189,28 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                       _f(s["planner_p95_ms"])] for m in methods for s in [per_m[m]]))
     lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (Eq. (20)): means over episodes. Active, "
               "QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time.", ""]
-    lines += [f"{h}# Success per scenario (%)", ""]
+    lines += [f"{h}# CBF burden and shared-uncertainty margins", ""]
+    lines += _table(["Method", "Active, steps (%)", "Active, episode mean (%)", "E_CBF", "E_CBF from infeasible (%)",
+                     "m img mean / p90 (m)", "m exec mean / p90 (m)"],
+                    ([display(m), _f(s["cbf_active_pct"]), _f(s["cbf_active_episode_pct"]), _f(s["e_cbf"]),
+                      _f(s["e_cbf_infeasible_share_pct"], 1),
+                      f"{_f(s['m_img_mean_m'], 3)} / {_f(s['m_img_p90_m'], 3)}",
+                      f"{_f(s['m_exec_mean_m'], 3)} / {_f(s['m_exec_p90_m'], 3)}"] for m in methods for s in [per_m[m]]))
+    lines += ["", "Active, steps: share of all control steps (the paper's definition); episode mean: mean of the "
+              "episodes' ratios. m: the margin kappa_l m_i that each layer adds to r_R + r_i + d0 (Eq. 14), the mean "
+              "over episodes of the episode's mean / 90th percentile; imagination over the selected rollout's steps "
+              "and obstacles at each selection (NoShared: its fixed margin), execution over the CBF rows at each "
+              "control step.", ""]
+    lines += [f"{h}# Per scenario: CBF activation and margins", ""]
+    lines += _table(["Method", "Scenario", "Success (%)", "Active, steps / episode mean (%)", "E_CBF",
+                     "E_CBF from infeasible (%)", "m img mean / p90 (m)", "m exec mean / p90 (m)"],
+                    ([display(m), sc.replace("_", " "), _f(s["success_pct"], 0),
+                      f"{_f(s['cbf_active_pct'])} / {_f(s['cbf_active_episode_pct'])}", _f(s["e_cbf"]),
+                      _f(s["e_cbf_infeasible_share_pct"], 1),
+                      f"{_f(s['m_img_mean_m'], 3)} / {_f(s['m_img_p90_m'], 3)}",
+                      f"{_f(s['m_exec_mean_m'], 3)} / {_f(s['m_exec_p90_m'], 3)}"]
+                     for m in methods for sc in scenarios for s in [per_ms[m][sc]]), align="llrrrrrr")
+    lines += ["", f"{h}# Success per scenario (%)", ""]
     lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
                     ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
     lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",

@@ -40,6 +40,7 @@ class BigCbfPlanner:
         self._next_t: float | None = None
         self._path: np.ndarray | None = None
         self._release_v: np.ndarray | None = None
+        self._margins: np.ndarray | None = None
         self.last_imagination: Imagination | None = None
         self.last_selection: Selection | None = None
 
@@ -55,9 +56,11 @@ class BigCbfPlanner:
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
             self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared)
             self._path = rel.p[best]
+            self._margins = rel.margin[best].ravel()
         else:
             self._release_v = None
             self._path = img.p[img.index(sel.mode)]
+            self._margins = img.margin[img.index(sel.mode)].ravel()
         self.last_imagination, self.last_selection = img, sel
         return sel
 
@@ -74,4 +77,5 @@ class BigCbfPlanner:
         mode = self.selector.mode
         u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
                          self.params)                                                         # Eq. (5)
-        return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path)
+        return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,
+                           margins_img=self._margins if planned else None)
