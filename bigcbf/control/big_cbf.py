@@ -21,8 +21,20 @@ _T_EPS = 1e-6   # tolerance of the selection clock [s] (control ticks are floats
 
 
 class BigCbfPlanner:
-    """BIG-CBF (``shared=True``) or BIG-CBF-NoShared (``shared=False``: the imagination uses a fixed
-    ``noshared_margin_m`` instead of kappa_img m_i). Deterministic: ``reset(seed)`` ignores the seed.
+    """BIG-CBF (``shared=True``) or BIG-CBF-NoShared (``shared=False``). Deterministic: ``reset(seed)`` ignores the
+    seed.
+
+    NoShared as the paper writes it (Sec. IV-C, "Ablation design"; Sec. V for the hardware): "the same behavior
+    library, feedback policies, horizon, switching logic, and final hard CBF as BIG-CBF, but replaces the
+    imagination-layer uncertainty construction in Eq. (uncertainty_margin) with a fixed 0.30-m geometric margin".
+    Checked against this code: the two variants share the behaviors and policies (``behaviors``), N and dt, the
+    scoring (Eqs. 10, 17) and the selector (dwell, switching threshold, side commitment), the reverse-release
+    fallback and the rollouts' execution model (A, d of Eq. (1), which propagates the imagined robot in both), and
+    the common CbfFilter with the full shared D_i^exec. The one difference is in ``imagine`` (and the fallback's
+    release choice, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
+    of r_R + r_i + d0 + kappa_img m_i. kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
+    the shared m_i, which NoShared does not use ("a fixed 0.30 m margin", also with the hardware preset's
+    kappa_img = 0.8).
 
     The first call selects; later selections happen on the grid t_0 + n T_B (with a tolerance for float
     clocks). ``last_imagination`` and ``last_selection`` keep the latest cycle for inspection.
