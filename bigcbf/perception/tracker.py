@@ -5,6 +5,9 @@ Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
+* classified static/dynamic (``classify``) from its next measurement on: until then its velocity is the difference
+  of two or three noisy centres (a 0.15 m bin 4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range
+  noise, jumped 11 cm between its first two fits and was classified dynamic at its fourth scan);
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
   pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted; while it coasts,
   its reported covariance is bounded by physics (:func:`coast_bound`);
@@ -164,6 +167,12 @@ class Tracker:
             v = x[:, 2:]
             st, nd, ns = hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
                                          np.linalg.norm(v, axis=1), speed_sigma(v, P[:, 2:, 2:]), pr)
+            # the classification starts once the velocity rests on more than confirm_hits measurements: a young
+            # track's velocity is the difference of two or three noisy centres (module docstring)
+            young = self.hits[rows] <= pr.confirm_hits
+            st = np.where(young, self.static[rows], st)
+            nd = np.where(young, 0, nd)
+            ns = np.where(young, 0, ns)
             self.static[rows], self.n_dyn[rows], self.n_stat[rows] = st, nd, ns
             self.P_hit[rows] = np.where(st[:, None, None], self.Ps[rows], P[:, :2, :2])
             self.sv_hit[rows] = np.sqrt(np.linalg.eigvalsh(P[:, 2:, 2:])[:, -1])

@@ -146,3 +146,15 @@ def test_static_track_that_starts_moving_follows_it():
         tr.step(0.1 * k, np.array([[x, 1.0]]), np.array([0.25]), ORIGIN)
         errs.append(np.linalg.norm(tr.obstacles(ORIGIN).p[0] - [x, 1.0]))
     assert max(errs) < 0.3 and not tr.obstacles(ORIGIN).static[0]
+
+
+def test_young_track_is_not_classified_on_its_first_noisy_centres():
+    """A static bin whose first fitted centre is 11 cm off (few beams, range noise): the velocity of its first
+    updates is that jump, not motion; the classification waits until the velocity rests on more than
+    confirm_hits measurements."""
+    tr = _tracker(confirm_hits=3)
+    rng = np.random.default_rng(1)
+    tr.step(0.0, np.array([[4.36, -0.905]]), np.array([0.15]), ORIGIN)
+    for k in range(1, 20):
+        tr.step(0.1 * k, np.array([[4.47, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
+        assert tr.static[0], f"classified dynamic at update {k + 1}"
