@@ -29,8 +29,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from ..errors import UserError
-from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, SCENARIO_ORDER, TABLE2_KEYS, display,
-                    ordered)
+from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
+                    TABLE2_KEYS, display, ordered)
 
 KEY_FIELDS = ("scenario", "method", "seed", "params_hash", "scenario_sha")
 FIGURES = ("success_heatmap.png", "cbf_burden.png")
@@ -98,7 +98,8 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
         "by_scenario": {m: {s: summarize(r for r in by_m[m] if r["scenario"] == s) for s in scenarios}
                         for m in methods},
         "paper": {"table_ii": {m: PAPER_TABLE_II[m] for m in METHOD_ORDER},
-                  "scenario_success_pct": PAPER_SCENARIO_SUCCESS},
+                  "scenario_success_pct": PAPER_SCENARIO_SUCCESS,
+                  "table_iii": {m: PAPER_TABLE_III[m] for m in METHOD_ORDER}},
         "error_episodes": [{k: r[k] for k in ("scenario", "method", "seed", "error")}
                            for r in rows if r["status"] == "error"],
     }
@@ -215,6 +216,46 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                     ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
     lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
               f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
+    if b.get("suite") == "hardware":
+        lines += _table_iii_lines(summary, methods, h)
+    else:
+        lines += _table_ii_lines(summary, methods, scenarios, h)
+    errs = summary["error_episodes"]
+    if errs:
+        lines += ["", f"{h}# Episodes that crashed", ""]
+        lines += [f"- {e['scenario']} / {e['method']} / seed {e['seed']}: {e['error']}" for e in errs[:50]]
+        if len(errs) > 50:
+            lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
+    return "\n".join(lines) + "\n"
+
+
+def _table_iii_lines(summary: dict, methods: Sequence[str], h: str) -> list[str]:
+    """Ours beside the paper's Table III (the hardware suite)."""
+    per_m = summary["methods"]
+    paper = summary["paper"]["table_iii"]
+    lines = [f"{h}# Ours beside the paper's Table III (hardware)", "",
+             "Each pair is ours (the twin: the lab-scale scenes with a real X3-class robot profile and the physical "
+             "preset) / the paper's (a physical X3, 15 supervised trials per method: three scenes x 5; its success "
+             "as k/15). – where the paper gives no number.", ""]
+    cols = [("Time (s)", "time_s"), ("Clearance (m)", "min_clearance_m"), ("E_CBF", "e_cbf"),
+            ("Active (%)", "cbf_active_pct"), ("QP infeas. (%)", "qp_infeasible_pct"), ("Collisions", "collisions")]
+
+    def success(m):
+        s, pp = per_m[m], paper.get(m, {})
+        k = round(s["success_pct"] * s["ok"] / 100) if s["success_pct"] is not None else None
+        ours = f"{k}/{s['ok']} ({_f(s['success_pct'], 1)})" if k is not None else "–"
+        theirs = f"{pp['successes']}/{pp['trials']} ({_f(pp['success_pct'], 1)})" if pp else "–"
+        return f"{ours} / {theirs}"
+    lines += _table(["Method", "Episodes", "Success (%)"] + [c for c, _ in cols],
+                    ([display(m), str(per_m[m]["ok"]), success(m)]
+                     + [f"{_f(per_m[m][k])} / {_f(paper.get(m, {}).get(k))}" for _, k in cols] for m in methods))
+    return lines
+
+
+def _table_ii_lines(summary: dict, methods: Sequence[str], scenarios: Sequence[str], h: str) -> list[str]:
+    """Ours beside the paper's Table II (and the per-scenario success its text quotes)."""
+    per_m, per_ms = summary["methods"], summary["by_scenario"]
+    lines: list[str] = []
     paper = summary["paper"]["table_ii"]
     lines += [f"{h}# Ours beside the paper's Table II", "",
               "Each pair is ours / the paper's (the paper: 450 episodes per method, its own simulator; collisions and "
@@ -232,13 +273,7 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
         lines += _table(["Method"] + [s.replace("_", " ") for s in quoted],
                         ([display(m)] + [f"{_f(per_ms[m][s]['success_pct'], 0)} / {_f(pss[s].get(m), 0)}"
                                          for s in quoted] for m in methods))
-    errs = summary["error_episodes"]
-    if errs:
-        lines += ["", f"{h}# Episodes that crashed", ""]
-        lines += [f"- {e['scenario']} / {e['method']} / seed {e['seed']}: {e['error']}" for e in errs[:50]]
-        if len(errs) > 50:
-            lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 # --- figures -------------------------------------------------------------------------------------------------------
@@ -280,7 +315,8 @@ def plot_burden(summary: dict, path: Path) -> None:
     import numpy as np
 
     methods = summary["bench"]["methods"]
-    paper = summary["paper"]["table_ii"]
+    table = "table_iii" if summary["bench"].get("suite") == "hardware" else "table_ii"
+    paper = summary["paper"][table]
     y = np.arange(len(methods))
     fig, axes = plt.subplots(1, 2, figsize=(10, 1.6 + 0.45 * len(methods)), dpi=150, sharey=True,
                              layout="constrained")
@@ -289,7 +325,8 @@ def plot_burden(summary: dict, path: Path) -> None:
         ours = np.array([np.nan if (v := summary["methods"][m][key]) is None else v for m in methods], float)
         ref = np.array([np.nan if (v := paper.get(m, {}).get(key)) is None else v for m in methods], float)
         ax.barh(y, np.nan_to_num(ours), color="tab:blue", alpha=0.8, label="ours")
-        ax.scatter(ref, y, marker="D", color="black", zorder=3, label="paper (Table II)")
+        ax.scatter(ref, y, marker="D", color="black", zorder=3,
+                   label="paper (Table III)" if table == "table_iii" else "paper (Table II)")
         for yi, v in zip(y, ours):
             if not np.isnan(v):
                 ax.text(v, yi + 0.32, f" {v:.2f}", va="center", fontsize=7, color="tab:blue")

@@ -34,8 +34,9 @@ class BenchConfig:
     workers: int | None = None            # local: default os.cpu_count(); ray: default all CPUs of the cluster
     engine: str = "local"
     ray_address: str | None = None
-    params: object = None                 # StackParams (default SIMULATION, Table I)
+    params: object = None                 # StackParams (default: default_stack_params(), Table I + the X3's profile)
     perception: str = "lidar"
+    suite: str | None = None              # the suite the scenarios come from (reports compare with its paper table)
 
 
 @dataclass
@@ -60,7 +61,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     """
     from ..control.methods import METHODS
     from ..episode import PERCEPTION_MODES
-    from ..params.stack import SIMULATION
+    from ..params.stack import default_stack_params
     from ..scenario import base_profile_text, load_scenario, resolve_path
 
     if not config.methods:
@@ -83,7 +84,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
         raise UserError(f"unknown perception {config.perception!r}; known: {', '.join(PERCEPTION_MODES)}")
     for m in config.methods:
         METHODS.get(m)
-    ptoml = params_toml(config.params if config.params is not None else SIMULATION)
+    ptoml = params_toml(config.params if config.params is not None else default_stack_params())
     phash = params_key(ptoml, config.perception)
 
     scen: dict[str, tuple[str, str, str]] = {}     # name -> (key, text, base robot profile's text)
@@ -189,7 +190,7 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
                                   errors=errors_now, wall_time_s=round(wall, 2), completed=completed)
             rows = store.rows([t.key for t in tasks])
             runs = store.runs(phash)
-        info = {"perception": config.perception, "params_hash": phash, "engine": config.engine,
+        info = {"suite": config.suite, "perception": config.perception, "params_hash": phash, "engine": config.engine,
                 "workers": config.workers or (os.cpu_count() if config.engine == "local" else "all")}
         if runs:   # over every invocation that ran episodes of these parameters (a resumed bench has several)
             n, w = sum(r["episodes_run"] for r in runs), sum(r["wall_time_s"] for r in runs)
