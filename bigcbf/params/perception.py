@@ -104,6 +104,9 @@ class PerceptionParams:
     n_dynamic: int = 3
     n_static: int = 5
     dynamic_sigma: float = 1.0
+    #: The classification starts once a track's velocity rests on more than this many measurements (before that it
+    #: is the difference of two or three noisy centres; see ``tracker``).
+    classify_after_hits: int = 3
 
     # --- walls ------------------------------------------------------------------------------------------------------
     #: Each wall cluster contributes its point nearest to the robot and points spaced wall_spacing_m along the
@@ -154,6 +157,8 @@ class PerceptionParams:
             raise ValueError("max_candidates must be >= max_tracks")
         if self.confirm_hits < 1 or self.tentative_max_misses < 0:
             raise ValueError("confirm_hits must be >= 1 and tentative_max_misses >= 0")
+        if self.classify_after_hits < 1:
+            raise ValueError("classify_after_hits must be >= 1")
         if self.n_dynamic < 1 or self.n_static < 1:
             raise ValueError("n_dynamic and n_static must be >= 1")
         if not self.v_static_mps < self.v_dynamic_mps:

@@ -5,7 +5,8 @@ Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
-* classified static/dynamic (``classify``) from its next measurement on: until then its velocity is the difference
+* classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits (3)
+  measurements: until then its velocity is the difference
   of two or three noisy centres (a 0.15 m bin 4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range
   noise, jumped 11 cm between its first two fits and was classified dynamic at its fourth scan);
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
@@ -167,9 +168,9 @@ class Tracker:
             v = x[:, 2:]
             st, nd, ns = hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
                                          np.linalg.norm(v, axis=1), speed_sigma(v, P[:, 2:, 2:]), pr)
-            # the classification starts once the velocity rests on more than confirm_hits measurements: a young
-            # track's velocity is the difference of two or three noisy centres (module docstring)
-            young = self.hits[rows] <= pr.confirm_hits
+            # the classification starts once the velocity rests on more than classify_after_hits measurements: a
+            # young track's velocity is the difference of two or three noisy centres (module docstring)
+            young = self.hits[rows] <= pr.classify_after_hits
             st = np.where(young, self.static[rows], st)
             nd = np.where(young, 0, nd)
             ns = np.where(young, 0, ns)
