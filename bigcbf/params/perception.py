@@ -104,9 +104,12 @@ class PerceptionParams:
     n_dynamic: int = 3
     n_static: int = 5
     dynamic_sigma: float = 1.0
-    #: The classification starts once a track's velocity rests on more than this many measurements (before that it
-    #: is the difference of two or three noisy centres; see ``tracker``).
-    classify_after_hits: int = 3
+    #: The classification starts once a track's velocity rests on more than this many measurements. 1: from the
+    #: second measurement on. 3 (= confirm_hits) suppressed phantom dynamic tracks of small far objects (a new track's
+    #: first velocities are differences of two or three noisy centres) but delayed a pedestrian who appears near the
+    #: robot, who is reported static (v = 0) until classified: with 3, BIG-CBF collided in 2 of 60 dynamic episodes
+    #: (crowd_crossing seed 0, blind_corner seed 18; none with 1); see docs/fidelity.md.
+    classify_after_hits: int = 1
 
     # --- walls ------------------------------------------------------------------------------------------------------
     #: Each wall cluster contributes its point nearest to the robot and points spaced wall_spacing_m along the

@@ -5,10 +5,11 @@ Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
-* classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits (3)
-  measurements: until then its velocity is the difference
-  of two or three noisy centres (a 0.15 m bin 4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range
-  noise, jumped 11 cm between its first two fits and was classified dynamic at its fourth scan);
+* classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits measurements
+  (default 1: from its second measurement on; a higher value suppresses phantom dynamic tracks, e.g. a 0.15 m bin
+  4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range noise, jumped 11 cm between its first two
+  fits and was classified dynamic at its fourth scan, but delays a pedestrian who appears near the robot: see
+  PerceptionParams.classify_after_hits);
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
   pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted; while it coasts,
   its reported covariance is bounded by physics (:func:`coast_bound`);

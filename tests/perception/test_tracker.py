@@ -150,11 +150,16 @@ def test_static_track_that_starts_moving_follows_it():
 
 def test_young_track_is_not_classified_on_its_first_noisy_centres():
     """A static bin whose first fitted centre is 11 cm off (few beams, range noise): the velocity of its first
-    updates is that jump, not motion; the classification waits until the velocity rests on more than
-    confirm_hits measurements."""
-    tr = _tracker(confirm_hits=3)
+    updates is that jump, not motion; with classify_after_hits = 3 the classification waits until the velocity
+    rests on more than 3 measurements (from the second measurement on, it is classified dynamic at its fourth)."""
+    old = _tracker(confirm_hits=3, classify_after_hits=1)
+    for k, z in enumerate(([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])):
+        old.step(0.1 * k, np.array([z]), np.array([0.15]), ORIGIN)
+    assert not old.static[0]
+    tr = _tracker(confirm_hits=3, classify_after_hits=3)
     rng = np.random.default_rng(1)
     tr.step(0.0, np.array([[4.36, -0.905]]), np.array([0.15]), ORIGIN)
-    for k in range(1, 20):
-        tr.step(0.1 * k, np.array([[4.47, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
+    tr.step(0.1, np.array([[4.47, -0.945]]), np.array([0.15]), ORIGIN)
+    for k in range(2, 20):
+        tr.step(0.1 * k, np.array([[4.53, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
         assert tr.static[0], f"classified dynamic at update {k + 1}"
