@@ -176,7 +176,7 @@ def test_resume_after_sigkill(short_scenarios, tmp_path, capsys):
     (["--engine", "spark"], "--engine must be one of local, ray"),
     (["--ray-address", "auto"], "--ray-address needs --engine ray"),
     (["--profile", "/nonexistent/profile.toml"], "/nonexistent/profile.toml"),
-    (["--suite", "nope"], "unknown suite 'nope'; known: paper"),
+    (["--suite", "nope"], "unknown suite 'nope'; known: hardware, paper"),
 ])
 def test_cli_errors_are_one_line(extra, message, tmp_path, capsys):
     seeds = [] if {"--seeds", "--seed-list"} & set(extra) else ["--seeds", "1"]
