@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 SYSLIBS := libegl1 libopengl0 libgl1-mesa-dri libgomp1
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test setup syslibs perf clean wheel-check
+.PHONY: demo test setup syslibs perf profiles clean wheel-check
 
 setup: syslibs $(STAMP)
 
@@ -42,6 +42,12 @@ wheel-check: setup
 
 perf: setup
 	$(VENV)/bin/bigcbf perf
+
+# The stack's uncertainty profiles of the shipped simulated robots, made by the twin (record a calibration drive,
+# calibrate it): bigcbf/profiles/stack/x3_sim.toml (run, bench) and x3_hardware.toml (bench --suite hardware).
+profiles: setup
+	$(VENV)/bin/bigcbf profile simulate --robot-profile x3_sim
+	$(VENV)/bin/bigcbf profile simulate --robot-profile x3_hardware --base physical
 
 clean:
 	rm -rf $(VENV) *.egg-info build

@@ -17,11 +17,15 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.1.0"
 
-#: The package's own data (shipped in the wheel): the MJCF robot model and the scenario files. The repository's
+#: The package's own data (shipped in the wheel): the MJCF robot model, the scenario files and the
+#: robot and stack profiles. The repository's
 #: top-level ``assets`` and ``scenarios`` are symbolic links to these folders.
 PACKAGE = Path(__file__).resolve().parent
 ASSETS = PACKAGE / "assets"
 SCENARIOS = PACKAGE / "scenarios"
+#: Robot profiles (hardware imperfections and sensor models) shipped with the package, and the stack's
+#: uncertainty profiles calibrated from them by the twin (``bigcbf profile simulate``).
+PROFILES = PACKAGE / "profiles"
 #: Default folder for videos: ``renders/`` of the current directory.
 RENDERS = Path("renders")
 

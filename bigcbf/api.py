@@ -163,7 +163,8 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     base = RunConfig(stack=s.params()) if s.params is not None else None
     cfg = load_config(config, profile, base=base, notes=notes)
     return BenchConfig(out=out, methods=method_list, scenarios=scenario_list, seeds=seed_list, workers=workers,
-                       engine=engine, ray_address=ray_address, config=cfg, perception=perception, labels=labels)
+                       engine=engine, ray_address=ray_address, config=cfg, perception=perception, labels=labels,
+                       suite=None if scenarios else s.name)
 
 
 def run_bench(out: str | Path, *, progress: bool | None = False, report_only: bool = False, **kwargs):

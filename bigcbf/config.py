@@ -3,7 +3,8 @@
 ``bigcbf run/bench --config RUN.toml`` reads it; every table and key is optional (missing ones keep their
 defaults, or the ``base`` given to :func:`load_run_config`)::
 
-    [stack]                 # StackParams: Table I (bigcbf/params/stack.py), BIG-CBF's and the filter's parameters
+    [stack]                 # StackParams (bigcbf/params/stack.py), BIG-CBF's and the filter's parameters: Table I
+                            # with the twin-calibrated profile of the simulated X3 unless given
     alpha_per_s = 1.5
     [stack.uncertainty]
     kappa_img = 1.0
@@ -37,7 +38,7 @@ from typing import Any
 from .control.methods import METHODS, method_params_type
 from .errors import UserError
 from .params.perception import PerceptionParams
-from .params.stack import SIMULATION, StackParams
+from .params.stack import StackParams, default_stack_params
 from .params.toml_io import from_dict, load_toml, to_dict
 from .sim.pedestrians import SocialForceParams
 
@@ -48,7 +49,8 @@ TABLES = ("stack", "perception", "pedestrians", "methods")
 class RunConfig:
     """Everything of a run that is not the scenario, the method's name, the seed or the LiDAR."""
 
-    stack: StackParams = SIMULATION
+    #: default: Table I with the stack profile the twin calibrated for the simulated X3 (bigcbf profile simulate)
+    stack: StackParams = field(default_factory=default_stack_params)
     perception: PerceptionParams = PerceptionParams()
     pedestrians: SocialForceParams = SocialForceParams()
     #: method name -> its parameters (an instance of the method's ``params_type``); methods not listed use

@@ -19,7 +19,7 @@ import numpy as np
 from .control.cbf import CbfFilter
 from .control.methods import make_planner
 from .control.liveness import LivenessRecorder
-from .control.metrics import cbf_energy
+from .control.metrics import cbf_energy, margin_stats
 from .control.planner import PlanInfo
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
@@ -67,6 +67,15 @@ class EpisodeResult:
     side_reversals: int = 0         # left/right reversals of the mode history (PASS/SIDE -L vs -R)
     lateral_reversals: int = 0      # left/right reversals of the command's lateral component (every method)
     no_progress_s: float = 0.0      # time in 2 s windows that brought the robot < 0.1 m closer to the goal
+    # the shared-uncertainty ablation's diagnostics (Sec. IV-C): E_CBF of the steps whose QP was infeasible, and the
+    # margins kappa_l m_i (Eq. 14) each layer used, mean and 90th percentile over the episode [m]: the imagination's
+    # over the selected rollout's steps and obstacles at each selection (BIG-CBF variants; NoShared: its fixed
+    # margin; None for methods without imagination), the execution layer's over the CBF rows at each control step
+    e_cbf_infeasible: float = 0.0
+    m_img_mean_m: float | None = None
+    m_img_p90_m: float | None = None
+    m_exec_mean_m: float | None = None
+    m_exec_p90_m: float | None = None
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -108,7 +117,7 @@ class Episode:
 
     def __init__(self, scenario: Scenario, method: str | None, seed: int, params: StackParams = SIMULATION,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
-                 lidar: LidarConfig = LidarConfig(), time_limit_s: float | None = None,
+                 lidar: LidarConfig | None = None, time_limit_s: float | None = None,
                  pedestrian_params: SocialForceParams = SocialForceParams(), method_params=None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
@@ -180,6 +189,9 @@ class Episode:
         self._limit = int(round(self.time_limit_s / w.dt))
         self._k = 0
         self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
+        self._e_cbf_inf = 0.0
+        self._margins_img: list[np.ndarray] = []
+        self._margins_exec: list[np.ndarray] = []
         self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
         self._modes: list[tuple[float, str]] = []
         self._live = LivenessRecorder(self.params.T_C_s)
@@ -245,9 +257,15 @@ class Episode:
         if pinfo.planned:
             self._planner_ms.append(pinfo.planner_ms)
         self._cbf_ms.append(finfo.solve_ms)
-        self._e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
+        e_step = cbf_energy(u_safe, u_in, p.R_u_diag)
+        self._e_cbf += e_step
         self._active += bool(finfo.active)
         self._infeasible += bool(finfo.infeasible)
+        if finfo.infeasible:
+            self._e_cbf_inf += e_step
+        self._margins_exec.append(finfo.margins)
+        if pinfo.margins_img is not None:
+            self._margins_img.append(pinfo.margins_img)
         self._n_ctrl += 1
         if not self._modes or self._modes[-1][1] != pinfo.mode:
             self._modes.append((round(w.t, 3), pinfo.mode))
@@ -283,6 +301,8 @@ class Episode:
         w, p = self.world, self.params
         ts = w.true_state()
         n = max(self._n_ctrl, 1)
+        m_img = margin_stats(np.concatenate(self._margins_img)) if self._margins_img else (None, None)
+        m_exec = margin_stats(np.concatenate(self._margins_exec)) if self._margins_exec else (None, None)
         return EpisodeResult(
             scenario=self.scenario.name, method=self.method or EXTERNAL, seed=self.seed, success=self._success,
             collision=self._collision, timeout=self.done and not (self._success or self._collision),
@@ -293,7 +313,9 @@ class Episode:
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
             mode_history=list(self._modes), perception=self.perception_mode, warnings=w.warnings(),
-            **self._live.metrics(self._modes, w.t))
+            **self._live.metrics(self._modes, w.t),
+            e_cbf_infeasible=self._e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
+            m_exec_p90_m=m_exec[1])
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
@@ -311,4 +333,5 @@ def _p95(xs) -> float:
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
                       "mode_history", "mode_switches_per_min", "side_reversals", "lateral_reversals",
-                      "no_progress_s")
+                      "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m", "m_exec_mean_m",
+                      "m_exec_p90_m")

@@ -1,7 +1,11 @@
 """Scenario files (scenarios/*.toml): loading, validation, and the paired world a seed draws.
 
 A scenario file holds the robot's start and goal, the time limit, walls, static obstacles, pedestrians, floor
-patches, robot-profile overrides and a description of the design. Any number in the file may instead be a
+patches, robot-profile overrides and a description of the design. The robot is the simulated X3 of
+``bigcbf/profiles/x3_sim.toml`` (latency, execution gain and bias, residuals, lateral slip, LiDAR, encoder and gyro
+noise) unless the file names another base profile with ``robot_profile_base`` (a shipped profile's name, e.g.
+``x3_hardware``, or a TOML path relative to the scenario file); its ``[robot_profile]`` table overrides keys of
+that base (nested tables such as ``[robot_profile.lidar]`` key by key). Any number in the file may instead be a
 random range that each seed draws from:
 
     speed_mps = { uniform = [0.8, 1.3] }      # uniform in [lo, hi]
@@ -19,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import SCENARIOS
+from . import PROFILES, SCENARIOS
 from .errors import UserError
-from .params.robot import RobotProfile
+from .params.robot import RobotProfile, merge_tables
 from .params.toml_io import from_dict, load_toml
 from .sim.scene import Box, Cylinder, FloorPatch, PedestrianBody, SceneSpec, Wall
 
@@ -116,10 +120,11 @@ class Scenario:
     cylinders: tuple[CylinderSpec, ...] = ()
     pedestrians: tuple[PedestrianSpec, ...] = ()
     floor_patches: tuple[FloorPatchSpec, ...] = ()
-    robot_profile: RobotProfile = RobotProfile()
+    robot_profile: RobotProfile = RobotProfile()   # the base profile with the file's overrides (set by the loader)
     dynamic: bool = False                    # informational: has moving people (set from pedestrians)
     file: str = field(default="", compare=False)
     seed: int = 0
+    robot_profile_base: str = field(default="", compare=False)   # the base profile's file (set by the loader)
 
     def __post_init__(self):
         if self.time_limit_s <= 0:
@@ -175,15 +180,70 @@ def scenario_rng(name: str, seed: int) -> np.random.Generator:
 
 # --- finding and loading ----------------------------------------------------------------------------------------
 
-def scenario_files() -> dict[str, Path]:
-    """The scenarios shipped in scenarios/, by name (the file stem)."""
-    return {p.stem: p for p in sorted(SCENARIOS.glob("*.toml"))}
+#: the robot profile every scenario starts from unless it names another (``robot_profile_base``)
+DEFAULT_ROBOT_PROFILE = "x3_sim"
+
+
+def profile_files() -> dict[str, Path]:
+    """The robot profiles shipped in bigcbf/profiles/, by name (the file stem)."""
+    return {p.stem: p for p in sorted(PROFILES.glob("*.toml"))}
+
+
+def robot_profile_path(ref: str, scenario_file: str | Path | None = None) -> Path:
+    """A base robot profile: a shipped profile's name, or a TOML path (relative to the scenario file's folder)."""
+    shipped = profile_files()
+    if ref in shipped:
+        return shipped[ref]
+    p = Path(ref)
+    if not p.is_absolute() and scenario_file is not None:
+        p = Path(scenario_file).parent / p
+    if p.suffix != ".toml" or not p.is_file():
+        raise UserError(f"no robot profile {ref!r}: neither a shipped profile ({', '.join(shipped)}) nor a .toml "
+                        "file", file=None if scenario_file is None else str(scenario_file), field="robot_profile_base")
+    return p
+
+
+def robot_profile_table(path: str | Path, text: str | None = None) -> dict:
+    """A robot-profile file's table, validated as a RobotProfile (errors name that file and the field); ``text``
+    instead of reading the file (the bench ships profiles as text)."""
+    import tomllib
+    if text is None:
+        data = load_toml(path)
+    else:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise UserError(f"not valid TOML: {exc}", file=str(path)) from None
+    from_dict(RobotProfile, data, file=str(path))
+    return data
+
+
+def load_robot_profile(name_or_file: str | Path = DEFAULT_ROBOT_PROFILE) -> RobotProfile:
+    """A robot profile by shipped name (``x3_sim``, ``x3_hardware``) or path."""
+    path = robot_profile_path(str(name_or_file))
+    return from_dict(RobotProfile, robot_profile_table(path), file=str(path))
+
+
+def scenario_files(folder: str | None = None) -> dict[str, Path]:
+    """The scenarios shipped in scenarios/ (the paper's nine), or in one of its sub-folders (``hardware``), by name
+    (the file stem)."""
+    root = SCENARIOS if folder is None else SCENARIOS / folder
+    return {p.stem: p for p in sorted(root.glob("*.toml"))}
+
+
+def all_scenario_files() -> dict[str, Path]:
+    """Every shipped scenario, sub-folders included, by name (names are unique across folders)."""
+    out = {}
+    for p in sorted(SCENARIOS.rglob("*.toml")):
+        out.setdefault(p.stem, p)
+    return out
 
 
 def resolve_path(name_or_file: str | Path) -> Path:
-    """A scenario name from scenarios/, or a path to a .toml file anywhere."""
+    """A shipped scenario's name (the nine of scenarios/ or those of its sub-folders, e.g. the hardware scenes),
+    or a path to a .toml file anywhere."""
     s = str(name_or_file)
-    files = scenario_files()
+    files = all_scenario_files()
     if s in files:
         return files[s]
     p = Path(s)
@@ -194,22 +254,64 @@ def resolve_path(name_or_file: str | Path) -> Path:
     raise UserError(f"unknown scenario {s!r}; known: {', '.join(files)} (or give a path to a .toml file)")
 
 
-def load_scenario(name_or_file: str | Path, seed: int = 0) -> Scenario:
-    """Load a scenario and draw its world for ``seed``."""
+def load_scenario(name_or_file: str | Path, seed: int = 0, *, robot_profile_text: str | None = None) -> Scenario:
+    """Load a scenario and draw its world for ``seed``. ``robot_profile_text``: the base robot profile's TOML
+    text, instead of reading the file the scenario refers to (the bench ships it with the task)."""
     path = resolve_path(name_or_file)
-    raw = load_toml(path)
+    return scenario_from_dict(load_toml(path), path, seed, robot_profile_text=robot_profile_text)
+
+
+def parse_scenario(text: str, file: str | Path = "<text>", seed: int = 0) -> Scenario:
+    """The Scenario a scenario file's TOML ``text`` describes, drawn for ``seed``, as :func:`load_scenario` reads
+    it (``file`` names it in errors and locates a relative ``robot_profile_base``)."""
+    import tomllib
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"not valid TOML: {exc}", file=str(file)) from None
+    return scenario_from_dict(raw, Path(file), seed)
+
+
+def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_text: str | None = None) -> Scenario:
+    """The Scenario of a scenario file's parsed TOML ``raw`` (read from ``path``), drawn for ``seed``."""
     for reserved in ("file", "seed", "dynamic"):
         if reserved in raw:
             raise UserError("unknown key (set by the loader, not by the file)", file=str(path), field=reserved)
     name = raw.get("name", path.stem)
     if not isinstance(name, str):
         raise UserError("expected a string", file=str(path), field="name")
+    base_ref = raw.pop("robot_profile_base", DEFAULT_ROBOT_PROFILE)
+    if not isinstance(base_ref, str):
+        raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),
+                        field="robot_profile_base")
+    base_path = robot_profile_path(base_ref, path) if robot_profile_text is None else Path(base_ref)
+    base = robot_profile_table(base_path, robot_profile_text)
     data = _resolve(raw, scenario_rng(name, seed), str(path), "")
     data.setdefault("name", name)
+    over = data.get("robot_profile", {})
+    if not isinstance(over, dict):
+        raise UserError(f"expected a table, got {over!r}", file=str(path), field="robot_profile")
+    data["robot_profile"] = merge_tables(base, over)
     sc = from_dict(Scenario, data, file=str(path))
     if not sc.description.strip():
         raise UserError("describe the scenario's design", file=str(path), field="description")
-    return replace(sc, file=str(path), seed=int(seed), dynamic=bool(sc.pedestrians))
+    return replace(sc, file=str(path), seed=int(seed), dynamic=bool(sc.pedestrians),
+                   robot_profile_base=str(base_path))
+
+
+def base_profile_text(name_or_file: str | Path) -> tuple[Path, str]:
+    """The base robot profile a scenario file refers to: its path and text (for the bench's episode key)."""
+    path = resolve_path(name_or_file)
+    raw = load_toml(path)
+    ref = raw.get("robot_profile_base", DEFAULT_ROBOT_PROFILE)
+    if not isinstance(ref, str):
+        raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),
+                        field="robot_profile_base")
+    p = robot_profile_path(ref, path)
+    try:
+        return p, p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read the robot profile ({exc})", file=str(p)) from None
 
 
 def describe(path: Path) -> str:

@@ -861,12 +861,8 @@ def _toml(fam: Family, seed: int, name: str, d: Draft, res: CheckResult, limit: 
 
 def parse(text: str, file: str = "<generated>"):
     """The Scenario a generated TOML text describes (as load_scenario reads it, seed 0)."""
-    from .params.toml_io import from_dict
-    from .scenario import Scenario
-    from dataclasses import replace
-
-    sc = from_dict(Scenario, tomllib.loads(text), file=file)
-    return replace(sc, file=file, dynamic=bool(sc.pedestrians))
+    from .scenario import parse_scenario
+    return parse_scenario(text, file, 0)
 
 
 def write(world: World, path: Path) -> bool:

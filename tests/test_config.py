@@ -12,7 +12,7 @@ from bigcbf.cli import main
 from bigcbf.config import RunConfig, config_from_toml, config_toml, load_run_config
 from bigcbf.control.baselines import DwaParams
 from bigcbf.errors import UserError
-from bigcbf.params.stack import SIMULATION
+from bigcbf.params.stack import SIMULATION, default_stack_params
 
 
 def write(tmp_path, text, name="run.toml"):
@@ -38,7 +38,8 @@ def test_tables_reach_their_dataclasses_and_defaults_stay(tmp_path):
 def test_bench_key_covers_the_whole_configuration(tmp_path):
     key = lambda c: params_key(params_toml(c), "lidar")                           # noqa: E731
     base = key(RunConfig())
-    assert key(SIMULATION) == base                         # StackParams = the default configuration with them
+    assert key(default_stack_params()) == base          # StackParams = the default configuration with them
+    assert key(SIMULATION) != base                      # the default stack is Table I with the X3's calibrated profile
     assert key(load_run_config(write(tmp_path, "[methods.dwa]\nn_xy = 9\n"))) == base    # an explicit default
     changed = {
         "stack": "[stack]\nalpha_per_s = 1.4\n", "perception": "[perception]\ngate_chi2 = 8.0\n",

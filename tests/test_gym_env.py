@@ -30,7 +30,8 @@ def test_env_steps_are_the_episode_loop_with_the_agents_u_in():
     seed, limit = 1, 4.0
     env = NavigationEnv("single_person_crossing", time_limit_s=limit)
     obs, info = env.reset(seed=seed)
-    agent = make_planner("cbf-only", SIMULATION)
+    params = env.episode.params                 # the environment's configuration (default: RunConfig())
+    agent = make_planner("cbf-only", params)
     done = False
     while not done:
         ep = env.episode
@@ -38,7 +39,7 @@ def test_env_steps_are_the_episode_loop_with_the_agents_u_in():
         obs, reward, terminated, truncated, info = env.step(u)
         assert obs in env.observation_space
         done = terminated or truncated
-    ref = Episode(load_scenario("single_person_crossing", seed), "cbf-only", seed, SIMULATION,
+    ref = Episode(load_scenario("single_person_crossing", seed), "cbf-only", seed, params,
                   time_limit_s=limit).run().metrics()
     for k in DETERMINISTIC_KEYS:
         if k == "mode_history":

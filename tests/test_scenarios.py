@@ -81,3 +81,27 @@ def test_reactive_pedestrian_steps_aside_for_the_robot_non_reactive_does_not():
             dev = max(dev, abs(peds.p[0, 1]))
         out.append(dev)
     assert out[0] > 0.1 and out[1] < 1e-9
+
+
+HARDWARE = ["lab_required_sidestepping", "lab_static_clutter", "lab_pedestrian_crossing"]
+
+
+def test_hardware_scenes_ship_beside_the_nine_and_load_by_name_or_path():
+    from bigcbf.scenario import load_robot_profile
+    assert sorted(scenario_files("hardware")) == sorted(HARDWARE)
+    for name in HARDWARE:
+        a = load_scenario(name, 2)
+        b = load_scenario(str(scenario_files("hardware")[name]), 2)
+        assert a == b and a.name == name
+        assert a.robot_profile == load_robot_profile("x3_hardware")
+
+
+@pytest.mark.parametrize("name", HARDWARE)
+def test_hardware_scene_runs_with_the_physical_preset(name):
+    from bigcbf.bench.suites import SUITES
+    from bigcbf.episode import Episode
+    params = SUITES.get("hardware").params()
+    assert (params.uncertainty.r_robot_m, params.uncertainty.d0_m, params.uncertainty.beta,
+            params.uncertainty.e_zoh_m, params.uncertainty.kappa_img) == (0.15, 0.05, 1.0, 0.0716, 0.8)
+    res = Episode(load_scenario(name, 0), "big-cbf", 0, params, time_limit_s=2.0).run()
+    assert not res.collision and res.control_steps >= 39

@@ -8,6 +8,13 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``e_cbf``: mean over episodes of E_CBF, Eq. (20) (a per-episode sum, as in the paper).
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
   over all control steps of all episodes of the group (the paper's "fraction of control steps").
+- ``cbf_active_episode_pct``: the mean over episodes of each episode's active ratio, x 100 (a long episode, e.g. a
+  stalled timeout at 0 %, weighs as much as a short one; the pooled figure weighs episodes by their length).
+- ``e_cbf_infeasible_share_pct``: 100 x the E_CBF of control steps whose QP was infeasible / all E_CBF, summed over
+  the group's episodes (``None`` when E_CBF is 0).
+- ``m_img_mean_m``, ``m_img_p90_m``, ``m_exec_mean_m``, ``m_exec_p90_m``: the margins kappa_l m_i (Eq. 14) of each
+  layer: the mean over episodes of each episode's mean and of each episode's 90th percentile (episode metrics of
+  the same names; the imagination's only for methods that imagine, ``None`` otherwise).
 - ``collisions``, ``timeouts``: counts.
 - ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
   (wall-clock figures: they depend on the machine and its load, unlike every other number here).
@@ -30,8 +37,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from ..errors import UserError
-from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, SCENARIO_ORDER, TABLE2_KEYS, display,
-                    ordered)
+from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
+                    TABLE2_KEYS, display, ordered)
 
 KEY_FIELDS = ("scenario", "method", "seed", "params_hash", "scenario_sha")
 FIGURES = ("success_heatmap.png", "cbf_burden.png")
@@ -68,6 +75,9 @@ def summarize(rows: Iterable[dict]) -> dict:
         "cbf_p95_ms": _mean([m["cbf_p95_ms"] for m in ok]),
         "perception_p95_ms": _mean([m["perception_p95_ms"] for m in ok]),
         "stopped_time_s": _mean([m["stopped_time_s"] for m in ok]),
+        "cbf_active_episode_pct": (100.0 * _mean([m["cbf_active_ratio"] for m in ok])) if n else None,
+        "e_cbf_infeasible_share_pct": _share([m.get("e_cbf_infeasible") for m in ok], [m["e_cbf"] for m in ok]),
+        **{k: _mean([m.get(k) for m in ok]) for k in MARGIN_KEYS},
         **{k: _mean([m.get(k) for m in ok]) for k in LIVENESS_KEYS},
     }
 
@@ -105,6 +115,17 @@ def by_family(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[
     return out
 
 
+#: the per-episode margin metrics (EpisodeResult) averaged over episodes in the summary
+MARGIN_KEYS = ("m_img_mean_m", "m_img_p90_m", "m_exec_mean_m", "m_exec_p90_m")
+
+
+def _share(part: Sequence[float | None], whole: Sequence[float]) -> float | None:
+    """100 x sum(part) / sum(whole) over the episodes that report ``part`` (None when that sum of whole is 0)."""
+    pairs = [(p, w) for p, w in zip(part, whole) if p is not None and w is not None and math.isfinite(w)]
+    total = sum(w for _, w in pairs)
+    return 100.0 * sum(p for p, _ in pairs) / total if total > 0 else None
+
+
 def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], seeds: Sequence[int],
                   info: dict | None = None, groups: dict | None = None) -> dict:
     """summary.json's content: figures keyed by method and by method then scenario, the paper's, and errors;
@@ -124,7 +145,8 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
         "by_scenario": {m: {s: summarize(r for r in by_m[m] if r["scenario"] == s) for s in scenarios}
                         for m in methods},
         "paper": {"table_ii": {m: PAPER_TABLE_II[m] for m in METHOD_ORDER},
-                  "scenario_success_pct": PAPER_SCENARIO_SUCCESS},
+                  "scenario_success_pct": PAPER_SCENARIO_SUCCESS,
+                  "table_iii": {m: PAPER_TABLE_III[m] for m in METHOD_ORDER}},
         "error_episodes": [{k: r[k] for k in ("scenario", "method", "seed", "error")}
                            for r in rows if r["status"] == "error"],
         **extra,
@@ -225,20 +247,82 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
     lines += [f"{h}# Chatter and stall", ""]
     lines += _liveness_table(methods, [per_m[m] for m in methods], first="Method")
     lines += ["", LIVENESS_NOTE, ""]
+    lines += [f"{h}# CBF burden and shared-uncertainty margins", ""]
+    lines += _table(["Method", "Active, steps (%)", "Active, episode mean (%)", "E_CBF", "E_CBF from infeasible (%)",
+                     "m img mean / p90 (m)", "m exec mean / p90 (m)"],
+                    ([display(m), _f(s["cbf_active_pct"]), _f(s["cbf_active_episode_pct"]), _f(s["e_cbf"]),
+                      _f(s["e_cbf_infeasible_share_pct"], 1),
+                      f"{_f(s['m_img_mean_m'], 3)} / {_f(s['m_img_p90_m'], 3)}",
+                      f"{_f(s['m_exec_mean_m'], 3)} / {_f(s['m_exec_p90_m'], 3)}"] for m in methods for s in [per_m[m]]))
+    lines += ["", "Active, steps: share of all control steps (the paper's definition); episode mean: mean of the "
+              "episodes' ratios. m: the margin kappa_l m_i that each layer adds to r_R + r_i + d0 (Eq. 14), the mean "
+              "over episodes of the episode's mean / 90th percentile; imagination over the selected rollout's steps "
+              "and obstacles at each selection (NoShared: its fixed margin), execution over the CBF rows at each "
+              "control step.", ""]
     fam = summary.get("by_family")
-    if fam:
+    if fam:     # procedural worlds: the paper's tables are about its own scenes, not these
         lines += _family_sections(summary, h)
         lines += [f"![success rate per method, family and split]({image_dir}success_heatmap.png)", "",
                   f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
-    else:
-        lines += [f"{h}# Success per scenario (%)", ""]
-        lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
-                        ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
-        lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
-                  f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
-    paper = summary["paper"]["table_ii"]
-    if fam:     # procedural worlds: the paper's Table II is about its nine scenes, not these
         return _errors_section(summary, h, lines)
+    lines += [f"{h}# Per scenario: CBF activation and margins", ""]
+    lines += _table(["Method", "Scenario", "Success (%)", "Active, steps / episode mean (%)", "E_CBF",
+                     "E_CBF from infeasible (%)", "m img mean / p90 (m)", "m exec mean / p90 (m)"],
+                    ([display(m), sc.replace("_", " "), _f(s["success_pct"], 0),
+                      f"{_f(s['cbf_active_pct'])} / {_f(s['cbf_active_episode_pct'])}", _f(s["e_cbf"]),
+                      _f(s["e_cbf_infeasible_share_pct"], 1),
+                      f"{_f(s['m_img_mean_m'], 3)} / {_f(s['m_img_p90_m'], 3)}",
+                      f"{_f(s['m_exec_mean_m'], 3)} / {_f(s['m_exec_p90_m'], 3)}"]
+                     for m in methods for sc in scenarios for s in [per_ms[m][sc]]), align="llrrrrrr")
+    lines += ["", f"{h}# Success per scenario (%)", ""]
+    lines += _table(["Method"] + [s.replace("_", " ") for s in scenarios],
+                    ([display(m)] + [_f(per_ms[m][s]["success_pct"], 0) for s in scenarios] for m in methods))
+    lines += ["", f"![success rate per method and scenario]({image_dir}success_heatmap.png)", "",
+              f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
+    if b.get("suite") == "hardware":
+        lines += _table_iii_lines(summary, methods, h)
+    else:
+        lines += _table_ii_lines(summary, methods, scenarios, h)
+    return _errors_section(summary, h, lines)
+
+
+def _errors_section(summary: dict, h: str, lines: list[str]) -> str:
+    errs = summary["error_episodes"]
+    if errs:
+        lines += ["", f"{h}# Episodes that crashed", ""]
+        lines += [f"- {e['scenario']} / {e['method']} / seed {e['seed']}: {e['error']}" for e in errs[:50]]
+        if len(errs) > 50:
+            lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
+    return "\n".join(lines) + "\n"
+
+def _table_iii_lines(summary: dict, methods: Sequence[str], h: str) -> list[str]:
+    """Ours beside the paper's Table III (the hardware suite)."""
+    per_m = summary["methods"]
+    paper = summary["paper"]["table_iii"]
+    lines = [f"{h}# Ours beside the paper's Table III (hardware)", "",
+             "Each pair is ours (the twin: the lab-scale scenes with a real X3-class robot profile and the physical "
+             "preset) / the paper's (a physical X3, 15 supervised trials per method: three scenes x 5; its success "
+             "as k/15). – where the paper gives no number.", ""]
+    cols = [("Time (s)", "time_s"), ("Clearance (m)", "min_clearance_m"), ("E_CBF", "e_cbf"),
+            ("Active (%)", "cbf_active_pct"), ("QP infeas. (%)", "qp_infeasible_pct"), ("Collisions", "collisions")]
+
+    def success(m):
+        s, pp = per_m[m], paper.get(m, {})
+        k = round(s["success_pct"] * s["ok"] / 100) if s["success_pct"] is not None else None
+        ours = f"{k}/{s['ok']} ({_f(s['success_pct'], 1)})" if k is not None else "–"
+        theirs = f"{pp['successes']}/{pp['trials']} ({_f(pp['success_pct'], 1)})" if pp else "–"
+        return f"{ours} / {theirs}"
+    lines += _table(["Method", "Episodes", "Success (%)"] + [c for c, _ in cols],
+                    ([display(m), str(per_m[m]["ok"]), success(m)]
+                     + [f"{_f(per_m[m][k])} / {_f(paper.get(m, {}).get(k))}" for _, k in cols] for m in methods))
+    return lines
+
+
+def _table_ii_lines(summary: dict, methods: Sequence[str], scenarios: Sequence[str], h: str) -> list[str]:
+    """Ours beside the paper's Table II (and the per-scenario success its text quotes)."""
+    per_m, per_ms = summary["methods"], summary["by_scenario"]
+    lines: list[str] = []
+    paper = summary["paper"]["table_ii"]
     lines += [f"{h}# Ours beside the paper's Table II", "",
               "Each pair is ours / the paper's (the paper: 450 episodes per method, its own simulator; collisions and "
               "planner P95 from its text; – where the paper gives no number).", ""]
@@ -255,17 +339,7 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
         lines += _table(["Method"] + [s.replace("_", " ") for s in quoted],
                         ([display(m)] + [f"{_f(per_ms[m][s]['success_pct'], 0)} / {_f(pss[s].get(m), 0)}"
                                          for s in quoted] for m in methods))
-    return _errors_section(summary, h, lines)
-
-
-def _errors_section(summary: dict, h: str, lines: list[str]) -> str:
-    errs = summary["error_episodes"]
-    if errs:
-        lines += ["", f"{h}# Episodes that crashed", ""]
-        lines += [f"- {e['scenario']} / {e['method']} / seed {e['seed']}: {e['error']}" for e in errs[:50]]
-        if len(errs) > 50:
-            lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 LIVENESS_NOTE = ("Means over episodes (bigcbf/control/liveness.py): mode switches per minute; left/right reversals "
@@ -363,7 +437,8 @@ def plot_burden(summary: dict, path: Path) -> None:
     import numpy as np
 
     methods = summary["bench"]["methods"]
-    paper = summary["paper"]["table_ii"]
+    table = "table_iii" if summary["bench"].get("suite") == "hardware" else "table_ii"
+    paper = summary["paper"][table]
     y = np.arange(len(methods))
     fig, axes = plt.subplots(1, 2, figsize=(10, 1.6 + 0.45 * len(methods)), dpi=150, sharey=True,
                              layout="constrained")
@@ -372,7 +447,8 @@ def plot_burden(summary: dict, path: Path) -> None:
         ours = np.array([np.nan if (v := summary["methods"][m][key]) is None else v for m in methods], float)
         ref = np.array([np.nan if (v := paper.get(m, {}).get(key)) is None else v for m in methods], float)
         ax.barh(y, np.nan_to_num(ours), color="tab:blue", alpha=0.8, label="ours")
-        ax.scatter(ref, y, marker="D", color="black", zorder=3, label="paper (Table II)")
+        ax.scatter(ref, y, marker="D", color="black", zorder=3,
+                   label="paper (Table III)" if table == "table_iii" else "paper (Table II)")
         for yi, v in zip(y, ours):
             if not np.isnan(v):
                 ax.text(v, yi + 0.32, f" {v:.2f}", va="center", fontsize=7, color="tab:blue")

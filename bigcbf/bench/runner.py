@@ -18,7 +18,7 @@ from typing import Callable
 from ..errors import UserError
 from . import engines, report
 from .store import ResultStore
-from .tasks import EpisodeTask, params_key, params_toml, run_episode, text_sha
+from .tasks import EpisodeTask, params_key, params_toml, run_episode, scenario_key
 
 DB_NAME = "results.sqlite"
 OUTPUTS = ("results.sqlite", "episodes.csv", "summary.json", "summary.md") + report.FIGURES
@@ -34,11 +34,13 @@ class BenchConfig:
     workers: int | None = None            # local: default os.cpu_count(); ray: default all CPUs of the cluster
     engine: str = "local"
     ray_address: str | None = None
-    config: object = None                 # RunConfig (bigcbf.config; default: Table I and every default)
+    config: object = None                 # RunConfig (bigcbf.config; default: RunConfig(), i.e. Table I with the
+    #                                       twin-calibrated profile of the simulated X3, and every other default)
     perception: str = "lidar"
     #: (scenario as given in ``scenarios``, split, family) for the scenarios of a suite with splits/families;
     #: the reports give success per family and split for them
     labels: tuple[tuple[str, str, str], ...] = ()
+    suite: str | None = None              # the suite the scenarios come from (reports compare with its paper table)
 
 
 @dataclass
@@ -64,7 +66,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     from ..config import RunConfig
     from ..control.methods import resolve_method
     from ..episode import PERCEPTION_MODES
-    from ..scenario import load_scenario, resolve_path
+    from ..scenario import base_profile_text, load_scenario, resolve_path
 
     if not config.methods:
         raise UserError("no methods given")
@@ -89,22 +91,24 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     ptoml = params_toml(config.config if config.config is not None else RunConfig())
     phash = params_key(ptoml, config.perception)
 
-    scen: dict[str, tuple[str, str]] = {}          # name -> (sha, text)
+    scen: dict[str, tuple[str, str, str]] = {}     # name -> (key, text, base robot profile's text)
     for s in config.scenarios:
         path = resolve_path(s)
         try:
             text = path.read_text()
         except (OSError, UnicodeDecodeError) as exc:
             raise UserError(f"cannot read the scenario file ({exc})", file=str(path)) from None
+        _, profile_text = base_profile_text(path)
         name = None
         for seed in config.seeds:        # every seed's draw must be valid before we start
-            name = load_scenario(path, seed).name
+            name = load_scenario(path, seed, robot_profile_text=profile_text).name
         if name in scen:
             raise UserError(f"two scenarios are named {name!r}; a bench needs distinct names", file=str(path))
-        scen[name] = (text_sha(text), text)
+        scen[name] = (scenario_key(text, profile_text), text, profile_text)
     methods, names = report.default_order(config.methods, scen)
     tasks = [EpisodeTask(scenario=n, scenario_sha=scen[n][0], scenario_toml=scen[n][1], method=m, seed=int(seed),
-                         params_hash=phash, params_toml=ptoml, perception=config.perception)
+                         params_hash=phash, params_toml=ptoml, perception=config.perception,
+                         robot_profile_toml=scen[n][2])
              for seed in config.seeds for n in names for m in methods]
     return tasks, methods, names
 
@@ -199,7 +203,7 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
                                   errors=errors_now, wall_time_s=round(wall, 2), completed=completed)
             rows = store.rows([t.key for t in tasks])
             runs = store.runs(phash)
-        info = {"perception": config.perception, "params_hash": phash, "engine": config.engine,
+        info = {"suite": config.suite, "perception": config.perception, "params_hash": phash, "engine": config.engine,
                 "workers": config.workers or (os.cpu_count() if config.engine == "local" else "all")}
         if runs:   # over every invocation that ran episodes of these parameters (a resumed bench has several)
             n, w = sum(r["episodes_run"] for r in runs), sum(r["wall_time_s"] for r in runs)

@@ -60,3 +60,19 @@ def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
 SUITES.register("generated", Suite(
     "generated", "procedural worlds (bigcbf/worlds.py): 6 families x (30 dev + 30 test) worlds, written to "
     "DIR/worlds/, one seed each", _generated, default_seeds=1, splits=("dev", "test")))
+def _hardware(out: Path) -> list[SuiteEntry]:
+    from .paper import HARDWARE_SCENARIO_ORDER
+    return [SuiteEntry(name) for name in HARDWARE_SCENARIO_ORDER]
+
+
+def _hardware_params():
+    """The paper's physical preset (Sec. V: r_R 0.15 m, d0 0.05 m, beta 1, e_ZOH 0.0716 m, kappa_exec 1, kappa_img
+    0.8 in dynamic scenes) overlaid with the tau95 and execution model the twin calibrated for the real X3-class
+    robot profile (bigcbf/profiles/stack/x3_hardware.toml)."""
+    from ..params.stack import PHYSICAL, default_stack_params
+    return default_stack_params("x3_hardware", base=PHYSICAL)
+
+
+SUITES.register("hardware", Suite(
+    "hardware", "the paper's three hardware scenes (Sec. V, Table III) at a lab's scale, with the physical preset "
+    "and a real X3-class robot profile", _hardware, default_seeds=20, params=_hardware_params))

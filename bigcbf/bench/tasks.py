@@ -7,8 +7,10 @@ never touches the database: it returns a row (a plain dict) and the parent write
 
 Keys: an episode is identified by (scenario, method, seed, params_hash, scenario_sha). ``params_hash`` covers
 the whole run configuration (:mod:`bigcbf.config`: the stack, perception, pedestrian and every method's
-parameters, defaults filled in) and the perception mode, ``scenario_sha`` the scenario file's content, so changing
-any of them gives new rows instead of mixing results of different settings.
+parameters, defaults filled in) and the perception mode, ``scenario_sha`` the scenario file's content *and* the
+content of the base robot profile it starts from (``bigcbf/profiles/x3_sim.toml`` unless the file names another),
+so changing any of them gives new rows instead of mixing results of different settings. The task carries the
+profile's text too, so a worker runs the robot the key names.
 
 This module imports nothing heavy at import time (the spawned workers import it first and set their threading
 environment before numpy is loaded).
@@ -35,13 +37,14 @@ HASH_VERSION = "bigcbf-bench-2"
 class EpisodeTask:
     """One episode to run, in plain data."""
     scenario: str            # scenario name (the file's ``name``, or its stem)
-    scenario_sha: str        # sha256 of the scenario file's bytes
+    scenario_sha: str        # scenario_key(scenario file's text, its base robot profile's text)
     scenario_toml: str       # the scenario file's text
     method: str
     seed: int
     params_hash: str         # params_key(params_toml, perception)
     params_toml: str         # the RunConfig as TOML (bigcbf.config.config_toml)
     perception: str = "lidar"
+    robot_profile_toml: str | None = None   # the base robot profile's text (None: read the file it names)
 
     @property
     def key(self) -> tuple[str, str, int, str, str]:
@@ -66,6 +69,12 @@ def params_key(toml_text: str, perception: str) -> str:
     h.update(f"{HASH_VERSION}\nperception = {perception!r}\n".encode())
     h.update(toml_text.encode())
     return h.hexdigest()[:16]
+
+
+def scenario_key(scenario_text: str, robot_profile_text: str) -> str:
+    """The scenario part of an episode's key: sha256 over the scenario file's text and its base robot profile's
+    text (hex, 16), so editing the default robot profile gives new episodes."""
+    return text_sha(f"{scenario_text}\0robot profile\0{robot_profile_text}")
 
 
 def text_sha(text: str) -> str:
@@ -96,7 +105,7 @@ def _scenario(task: EpisodeTask):
     with tempfile.TemporaryDirectory(prefix="bigcbf-bench-") as d:
         path = Path(d) / f"{task.scenario}.toml"
         path.write_text(task.scenario_toml)
-        return load_scenario(path, task.seed)
+        return load_scenario(path, task.seed, robot_profile_text=task.robot_profile_toml)
 
 
 def _json_safe(metrics: dict) -> dict:

@@ -13,7 +13,7 @@ import sys
 from ..errors import UserError
 
 #: Subcommands, in the order ``bigcbf --help`` lists them.
-COMMANDS = ["scenarios", "methods", "run", "demo", "perf", "record", "calibrate", "replay", "bench"]
+COMMANDS = ["scenarios", "methods", "run", "demo", "perf", "record", "calibrate", "replay", "profile", "bench"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,7 +15,8 @@ def add_arguments(p):
                    help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
                         "every worker; default: every registered method)")
     p.add_argument("--suite", default="paper", metavar="NAME",
-                   help="the scenarios of a named suite (default paper: the nine of Table II)")
+                   help="the scenarios of a named suite: paper (default; the nine of Table II, 50 seeds) or hardware "
+                        "(the three lab scenes of Table III, 20 seeds, the physical preset)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
                    help="scenario names or .toml files instead of the suite's")
     p.add_argument("--split", default=None, metavar="NAME",
@@ -34,8 +35,9 @@ def add_arguments(p):
                    help="run configuration ([stack], [perception], [pedestrians], [methods.NAME]); the whole "
                         "configuration is part of the episode key")
     p.add_argument("--profile", type=Path, default=None,
-                   help="stack parameters / uncertainty profile TOML over the configuration's [stack] (default: "
-                        "Table I, or the suite's); part of the episode key")
+                   help="stack parameters / uncertainty profile TOML over the configuration's [stack] (default: the "
+                        "suite's; for paper, Table I with the twin-calibrated profile of the simulated X3); part of "
+                        "the episode key")
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",

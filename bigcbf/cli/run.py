@@ -19,7 +19,8 @@ def add_arguments(p):
                         "(docs/extending.md; default: every default)")
     p.add_argument("--profile", type=Path, default=None,
                    help="stack parameters / calibrated uncertainty profile TOML over the configuration's [stack] "
-                        "(default: Table I)")
+                        "(default: Table I with the twin-calibrated profile of the simulated X3, "
+                        "bigcbf/profiles/stack/x3_sim.toml)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
     p.add_argument("--video", type=Path, default=None, help="write an H.264 MP4 of the episode")

@@ -21,8 +21,20 @@ _T_EPS = 1e-6   # tolerance of the selection clock [s] (control ticks are floats
 
 
 class BigCbfPlanner:
-    """BIG-CBF (``shared=True``) or BIG-CBF-NoShared (``shared=False``: the imagination uses a fixed
-    ``noshared_margin_m`` instead of kappa_img m_i). Deterministic: ``reset(seed)`` ignores the seed.
+    """BIG-CBF (``shared=True``) or BIG-CBF-NoShared (``shared=False``). Deterministic: ``reset(seed)`` ignores the
+    seed.
+
+    NoShared as the paper writes it (Sec. IV-C, "Ablation design"; Sec. V for the hardware): "the same behavior
+    library, feedback policies, horizon, switching logic, and final hard CBF as BIG-CBF, but replaces the
+    imagination-layer uncertainty construction in Eq. (uncertainty_margin) with a fixed 0.30-m geometric margin".
+    Checked against this code: the two variants share the behaviors and policies (``behaviors``), N and dt, the
+    scoring (Eqs. 10, 17) and the selector (dwell, switching threshold, side commitment), the reverse-release
+    fallback and the rollouts' execution model (A, d of Eq. (1), which propagates the imagined robot in both), and
+    the common CbfFilter with the full shared D_i^exec. The one difference is in ``imagine`` (and the fallback's
+    release choice, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
+    of r_R + r_i + d0 + kappa_img m_i. kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
+    the shared m_i, which NoShared does not use ("a fixed 0.30 m margin", also with the hardware preset's
+    kappa_img = 0.8).
 
     The first call selects; later selections happen on the grid t_0 + n T_B (with a tolerance for float
     clocks). ``last_imagination`` and ``last_selection`` keep the latest cycle for inspection.
@@ -40,6 +52,7 @@ class BigCbfPlanner:
         self._next_t: float | None = None
         self._path: np.ndarray | None = None
         self._release_v: np.ndarray | None = None
+        self._margins: np.ndarray | None = None
         self.last_imagination: Imagination | None = None
         self.last_selection: Selection | None = None
 
@@ -55,9 +68,11 @@ class BigCbfPlanner:
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
             self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared)
             self._path = rel.p[best]
+            self._margins = rel.margin[best].ravel()
         else:
             self._release_v = None
             self._path = img.p[img.index(sel.mode)]
+            self._margins = img.margin[img.index(sel.mode)].ravel()
         self.last_imagination, self.last_selection = img, sel
         return sel
 
@@ -74,4 +89,5 @@ class BigCbfPlanner:
         mode = self.selector.mode
         u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
                          self.params)                                                         # Eq. (5)
-        return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path)
+        return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,
+                           margins_img=self._margins if planned else None)

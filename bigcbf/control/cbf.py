@@ -74,6 +74,9 @@ class FilterInfo:
     D: np.ndarray                # D_i^exec for every obstacle (M,) [m]
     max_violation: float = 0.0   # largest normalized CBF-row violation of u_safe [m/s]
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # obstacle index of each counted row
+    #: kappa_exec m_i (Eq. 14: D_i - r_R - r_i - d0) [m] of the obstacles selected as CBF rows (before rows that
+    #: hold over the whole actuator box are dropped)
+    margins: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -285,6 +288,8 @@ class CbfFilter:
             u_in, fallback = np.zeros(3), "invalid-input"
         rows = cbf_rows(state, obstacles, u_in, self.params)
         idx = select_constraints(obstacles, rows, self.params)
+        unc = self.params.uncertainty
+        margins = rows.D[idx] - (unc.r_robot_m + unc.d0_m) - obstacles.r[idx]
         if len(idx) < len(rows.l):
             C, lvec = rows.C[idx], rows.l[idx]
         else:
@@ -319,7 +324,7 @@ class CbfFilter:
         info = FilterInfo(active=active, infeasible=infeasible, fallback=fallback,
                           solve_ms=(time.perf_counter() - t0) * 1e3, n_constraints=len(lvec),
                           h_min=float(h.min()) if len(h) else math.inf, D=rows.D, max_violation=max(viol, 0.0),
-                          rows=idx)
+                          rows=idx, margins=margins)
         return u, info
 
     def _infeasible(self, C, lvec, u_in, fallback):

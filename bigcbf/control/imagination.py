@@ -53,6 +53,8 @@ class Imagination:
     available: np.ndarray  # (B,) bool: a candidate (YIELD needs a dynamic obstacle; REVERSE never is one)
     accepted: np.ndarray   # (B,) bool: available and passes the barrier test of Eq. (16)
     deficit: np.ndarray | None = None    # (B,) sum over k = 1..N of max(0, -min_i h^img) [m^2] (the fallback's choice)
+    margin: np.ndarray | None = None     # (B, N+1, M) the imagination's margin D_i - (r_R + r_i + d0) [m]: kappa_img
+                                         # m_i (Eq. 14), or BIG-CBF-NoShared's fixed margin
 
     def index(self, mode: str) -> int:
         return self.modes.index(mode)
@@ -292,6 +294,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     W = np.zeros(B)
     h_min = np.full(B, np.inf)
     deficit = np.zeros(B)
+    margin = np.zeros((B, N + 1, 0))
     if M:
         q = Pc[:, :, None] - Oc[None]                                  # q_i = p - p_i (B, N+1, M)
         q2 = q.real ** 2 + q.imag ** 2
@@ -301,8 +304,10 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
             e_ex = ex.residual_horizon_s * np.interp(speed, ex.residual_speed_mps, ex.residual_bound_mps)
             m = (unc.tau95_s * np.abs(relv) + (unc.beta * np.sqrt(lambda_max_2x2(cov)))[None]
                  + (e_ex + unc.e_zoh_m)[:, :, None])                   # Eq. (15)
-            D = base + kap * m
+            margin = kap * m
+            D = base + margin
         else:
+            margin = np.full((B, N + 1, M), params.noshared_margin_m)
             D = base + params.noshared_margin_m
         h = q2 - D * D
         h_min = h.reshape(B, -1).min(axis=1)
@@ -331,4 +336,4 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit)
+    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin)

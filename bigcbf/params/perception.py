@@ -1,8 +1,8 @@
 """Perception parameters: LiDAR clustering, circle fitting, tracking (CV Kalman filter), static/dynamic
 hysteresis, wall representation and the laser's mounting on the robot.
 
-Every key is optional in a TOML table (``from_dict(PerceptionParams, table)``); the defaults suit the simulated
-360-beam, 10 Hz LiDAR of the Rosmaster X3 model. Units are in the field names (``_m``, ``_s``, ``_rad``,
+Every key is optional in a TOML table (``from_dict(PerceptionParams, table)``); the defaults suit the 360-beam,
+10 Hz RPLIDAR A1M8-class LiDAR of the Rosmaster X3 (its datasheet; ``bigcbf/profiles/x3_sim.toml``). Units are in the field names (``_m``, ``_s``, ``_rad``,
 ``_mps``, ``_m2``). What each group does is documented in ``bigcbf/perception/`` next to the code that uses it.
 """
 from __future__ import annotations
@@ -26,8 +26,12 @@ class PerceptionParams:
     #: + 3 * range_sigma_m, with lambda = cluster_lambda_rad (the shallowest incidence still joined).
     cluster_dist_m: float = 0.15
     cluster_lambda_rad: float = 0.1745
-    #: The LiDAR's range noise (standard deviation); set it to match the sensor.
-    range_sigma_m: float = 0.01
+    #: The LiDAR's range noise, standard deviation range_sigma_m + range_sigma_frac * range [m]; set it to match the
+    #: sensor. Defaults: the RPLIDAR A1M8 class of the X3 (datasheet: < 1 % of the distance, taken as 2 sigma, plus a
+    #: 5 mm floor; bigcbf/profiles/x3_sim.toml). Used by the clustering (3 sigma), the circle fit's tie tolerance and
+    #: the wall points' covariance.
+    range_sigma_m: float = 0.005
+    range_sigma_frac: float = 0.005
     #: Clusters with fewer points are not objects (single returns of grazing surfaces, thin things): they become
     #: wall points. So does a compact cluster that is not a clean arc and whose median point spacing exceeds
     #: grazing_spacing_factor times the beam spacing at its range (a surface seen at a grazing angle, e.g. a piece
@@ -69,6 +73,14 @@ class PerceptionParams:
     #: A confirmed track without measurement coasts (constant velocity, growing covariance) for coast_s, then is
     #: deleted (e.g. a pedestrian hidden behind a wall or another pedestrian).
     coast_s: float = 1.0
+    #: While a track coasts its reported position covariance is bounded by physics (``tracker.coast_bound``): a
+    #: static object does not move (its covariance stays that of its last update); a dynamic one is a walking
+    #: person, who cannot deviate from the constant-velocity prediction by more than
+    #: min((walk_speed_max_mps + |v|) tau, walk_accel_max_mps2 tau^2 / 2 + sigma_v tau) after tau seconds.
+    #: 2.0 m/s: above brisk walking (free walking speed 1.34 +- 0.26 m/s, Weidmann 1993); 2.5 m/s^2: a walker
+    #: starting at 1.3 m/s within the social-force relaxation time 0.5 s (Helbing & Molnar 1995).
+    walk_speed_max_mps: float = 2.0
+    walk_accel_max_mps2: float = 2.5
 
     # --- constant-velocity Kalman filter ----------------------------------------------------------------------------
     #: Measurement noise of a cluster centre (standard deviation per axis).
@@ -77,6 +89,11 @@ class PerceptionParams:
     accel_psd_m2ps3: float = 0.5
     #: Initial velocity standard deviation of a new track (velocity starts at 0).
     init_vel_sigma_mps: float = 1.5
+    #: Static tracks report the estimate of a constant-position Kalman filter run beside the CV filter: the position
+    #: is a random walk of this power spectral density [m^2/s] (the fitted centre of a post wanders as the viewpoint
+    #: changes: 1e-3 m^2/s gives a steady-state std of ~2 cm at 10 Hz with meas_sigma_m = 0.05). When its estimate
+    #: and the CV filter's disagree beyond gate_chi2 (the object moves), it restarts from the CV filter's.
+    static_pos_psd_m2ps: float = 1e-3
 
     # --- static / dynamic hysteresis --------------------------------------------------------------------------------
     #: A static track becomes dynamic after n_dynamic consecutive updates with speed > v_dynamic_mps and speed >
@@ -87,6 +104,12 @@ class PerceptionParams:
     n_dynamic: int = 3
     n_static: int = 5
     dynamic_sigma: float = 1.0
+    #: The classification starts once a track's velocity rests on more than this many measurements. 1: from the
+    #: second measurement on. 3 (= confirm_hits) suppressed phantom dynamic tracks of small far objects (a new track's
+    #: first velocities are differences of two or three noisy centres) but delayed a pedestrian who appears near the
+    #: robot, who is reported static (v = 0) until classified: with 3, BIG-CBF collided in 2 of 60 dynamic episodes
+    #: (crowd_crossing seed 0, blind_corner seed 18; none with 1); see docs/fidelity.md.
+    classify_after_hits: int = 1
 
     # --- walls ------------------------------------------------------------------------------------------------------
     #: Each wall cluster contributes its point nearest to the robot and points spaced wall_spacing_m along the
@@ -94,7 +117,9 @@ class PerceptionParams:
     wall_spacing_m: float = 0.2
     wall_range_m: float = 3.0
     wall_max_points: int = 24
-    #: Fixed position covariance of a wall point (isotropic, m^2).
+    #: A wall point's covariance comes from the scan (``geometry.wall_point_covariance``): range noise along the
+    #: beam, the beam's angular resolution across it. This fixed isotropic covariance [m^2] is for the ground-truth
+    #: mode's wall points only.
     wall_cov_m2: float = 1e-4
 
     # --- ground-truth mode (debugging and ablations only) -----------------------------------------------------------
@@ -108,12 +133,14 @@ class PerceptionParams:
                 raise ValueError(f"{f.name} must be finite")
         positive = ("cluster_dist_m", "grazing_spacing_factor", "compact_max_extent_m",
                     "radius_min_m", "gate_chi2", "gate_max_m", "gate_radius_m", "coast_s", "meas_sigma_m",
-                    "init_vel_sigma_mps", "v_static_mps", "wall_spacing_m", "wall_range_m")
+                    "init_vel_sigma_mps", "v_static_mps", "wall_spacing_m", "wall_range_m", "walk_speed_max_mps",
+                    "walk_accel_max_mps2")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
-        non_negative = ("range_sigma_m", "fit_span_ratio", "fit_min_arc_rad", "gate_min_m",
-                        "accel_psd_m2ps3", "dynamic_sigma", "wall_cov_m2", "ground_truth_cov_m2")
+        non_negative = ("range_sigma_m", "range_sigma_frac", "fit_span_ratio", "fit_min_arc_rad", "gate_min_m",
+                        "accel_psd_m2ps3", "static_pos_psd_m2ps", "dynamic_sigma", "wall_cov_m2",
+                        "ground_truth_cov_m2")
         for name in non_negative:
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
@@ -133,6 +160,8 @@ class PerceptionParams:
             raise ValueError("max_candidates must be >= max_tracks")
         if self.confirm_hits < 1 or self.tentative_max_misses < 0:
             raise ValueError("confirm_hits must be >= 1 and tentative_max_misses >= 0")
+        if self.classify_after_hits < 1:
+            raise ValueError("classify_after_hits must be >= 1")
         if self.n_dynamic < 1 or self.n_static < 1:
             raise ValueError("n_dynamic and n_static must be >= 1")
         if not self.v_static_mps < self.v_dynamic_mps:

@@ -1,6 +1,6 @@
-"""The robot profile: hardware imperfections between the body-twist command and the wheels.
+"""The robot profile: hardware imperfections between the body-twist command and the wheels, and the sensor models.
 
-A TOML robot profile (all keys optional; defaults are an ideal robot)::
+A TOML robot profile (all keys optional; the defaults of the dataclasses are an *ideal* robot: ``RobotProfile()``)::
 
     latency_s = 0.08                 # fixed command latency (s)
     latency_jitter_s = 0.02          # extra latency, uniform in [0, jitter] per command (s)
@@ -8,24 +8,108 @@ A TOML robot profile (all keys optional; defaults are an ideal robot)::
     bias = [0.02, 0.0, 0.0]          # execution bias d over (vx [m/s], vy [m/s], wz [rad/s])
     residual_max = [0.03, 0.03, 0.05]  # bounded residual noise r, uniform in [-max, max] per axis
     residual_hold_s = 0.05           # the residual is redrawn every residual_hold_s (zero-order hold)
-    floor_friction = 0.35            # sliding friction of the floor (slip); unset = the model's own
+    slip_max = 0.05                  # lateral slip: up to this fraction of ||u_xy||, across the motion [-]
+    slip_hold_s = 0.5                # the slip fraction is redrawn every slip_hold_s (s)
+    floor_friction = 0.35            # sliding friction of the floor; unset = the model's own
 
-The executed body twist is ``A u + d + r`` (paper Eq. (1), with A extended to 3x3 to cover yaw rate),
-applied ``latency`` after the command was issued; the wheels then realise it through the Mecanum
-inverse kinematics and the floor contact (where slip comes from).
+    [lidar]                          # the 2-D LiDAR (sensor_msgs/LaserScan)
+    n_beams = 360                    # beams per revolution (angular resolution 2 pi / n_beams)
+    rate_hz = 10.0                   # scans per second
+    range_min_m = 0.15
+    range_max_m = 12.0
+    range_noise_std_m = 0.005        # Gaussian range noise: std = range_noise_std_m + range_noise_frac * range
+    range_noise_frac = 0.005
+
+    [odometry]                       # wheel odometry (encoders)
+    encoder_counts_per_rev = 1320    # counts per wheel revolution (0: exact wheel angles)
+    scale_error = 0.01               # the odometry's wheel radius is off by this fraction [-]
+
+    [imu]                            # the gyro whose yaw rate the odometry uses for the heading
+    gyro_noise_density_radps_rthz = 1.75e-4   # white rate noise [rad/s/sqrt(Hz)]
+    gyro_bias_max_radps = 8.7e-4     # residual bias after start-up calibration, uniform in [-max, max] per episode
+
+The executed body twist is ``A u + d + r + s`` (paper Eq. (1), with A extended to 3x3 to cover yaw rate; ``s`` the
+lateral slip, perpendicular to the commanded translation), applied ``latency`` after the command was issued; the
+wheels then realise it through the Mecanum inverse kinematics and the floor contact. Every random source draws
+from its own stream (``bigcbf.sim.world``), so that e.g. LiDAR noise does not change the execution residuals.
+
+The simulated X3 used by every scenario by default is ``bigcbf/profiles/x3_sim.toml`` (its comments give the
+source of every value); scenario files override its keys in a ``[robot_profile]`` table.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 IDENTITY3: Mat3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
+def _nonneg(obj, *names: str) -> None:
+    for name in names:
+        v = getattr(obj, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+
+
+@dataclass(frozen=True)
+class LidarModel:
+    """A rotating 2-D LiDAR: beams evenly spaced over 360 degrees, one scan every 1/rate_hz.
+
+    Range noise is Gaussian with standard deviation ``range_noise_std_m + range_noise_frac * range`` [m]
+    (triangulation LiDARs lose accuracy with range). The defaults are the ideal sensor of the original model.
+    """
+
+    n_beams: int = 360                  # beams per scan [-]
+    rate_hz: float = 10.0               # scan rate [Hz]
+    range_min_m: float = 0.12           # shorter returns are dropped [m]
+    range_max_m: float = 8.0            # longer returns are dropped [m]
+    range_noise_std_m: float = 0.0      # constant part of the range noise std [m]
+    range_noise_frac: float = 0.0       # part of the range noise std proportional to the range [-]
+
+    def __post_init__(self):
+        if self.n_beams < 1 or not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError("n_beams must be >= 1 and rate_hz > 0")
+        if not (0 <= self.range_min_m < self.range_max_m and math.isfinite(self.range_max_m)):
+            raise ValueError("need 0 <= range_min_m < range_max_m")
+        _nonneg(self, "range_noise_std_m", "range_noise_frac")
+
+    def range_sigma(self, r):
+        """The range noise's standard deviation at range r [m]."""
+        return self.range_noise_std_m + self.range_noise_frac * r
+
+
+@dataclass(frozen=True)
+class OdometryModel:
+    """Wheel odometry from quantized encoder counts, with a wheel-radius (scale) error."""
+
+    encoder_counts_per_rev: int = 0     # encoder counts per wheel revolution; 0 = exact wheel angles [-]
+    scale_error: float = 0.0            # odometry speeds are (1 + scale_error) x the wheels' true ones [-]
+
+    def __post_init__(self):
+        if self.encoder_counts_per_rev < 0:
+            raise ValueError("encoder_counts_per_rev must be >= 0")
+        if not (math.isfinite(self.scale_error) and -0.5 < self.scale_error < 0.5):
+            raise ValueError("scale_error must be in (-0.5, 0.5)")
+
+
+@dataclass(frozen=True)
+class ImuModel:
+    """The gyro's yaw rate: true rate + bias + white noise (noise density in rad/s/sqrt(Hz), so a reading averaged
+    over dt has standard deviation density / sqrt(dt)); the bias is drawn once per episode, uniform in
+    [-gyro_bias_max_radps, gyro_bias_max_radps] (what is left after the start-up calibration)."""
+
+    gyro_noise_density_radps_rthz: float = 0.0   # white rate-noise density [rad/s/sqrt(Hz)]
+    gyro_bias_max_radps: float = 0.0              # bound of the residual bias [rad/s]
+
+    def __post_init__(self):
+        _nonneg(self, "gyro_noise_density_radps_rthz", "gyro_bias_max_radps")
+
+
 @dataclass(frozen=True)
 class RobotProfile:
-    """Hardware imperfections (keys documented in the module docstring and the README)."""
+    """Hardware imperfections and sensor models (keys documented in the module docstring and the README)."""
 
     latency_s: float = 0.0
     latency_jitter_s: float = 0.0
@@ -33,7 +117,12 @@ class RobotProfile:
     bias: Vec3 = (0.0, 0.0, 0.0)
     residual_max: Vec3 = (0.0, 0.0, 0.0)
     residual_hold_s: float = 0.05
+    slip_max: float = 0.0               # lateral slip bound, fraction of ||u_xy|| [-]
+    slip_hold_s: float = 0.5            # the slip fraction is redrawn every slip_hold_s [s]
     floor_friction: float | None = None
+    lidar: LidarModel = field(default_factory=LidarModel)
+    odometry: OdometryModel = field(default_factory=OdometryModel)
+    imu: ImuModel = field(default_factory=ImuModel)
 
     def __post_init__(self):
         if self.latency_s < 0 or self.latency_jitter_s < 0:
@@ -42,14 +131,31 @@ class RobotProfile:
             raise ValueError("residual_max must be >= 0 on every axis")
         if self.residual_hold_s <= 0:
             raise ValueError("residual_hold_s must be > 0")
+        if not (0 <= self.slip_max < 1):
+            raise ValueError("slip_max must be in [0, 1)")
+        if self.slip_hold_s <= 0:
+            raise ValueError("slip_hold_s must be > 0")
         if self.floor_friction is not None and not (0 < self.floor_friction <= 5):
             raise ValueError("floor_friction must be in (0, 5]")
 
     @property
     def is_ideal(self) -> bool:
+        """No execution imperfection and ideal sensors (the floor's friction is not an imperfection)."""
         return self == RobotProfile(floor_friction=self.floor_friction)
 
     def merged(self, **overrides) -> "RobotProfile":
         """A copy with some keys replaced (used by scenario files' robot-profile overrides)."""
         from dataclasses import replace
         return replace(self, **overrides)
+
+
+def merge_tables(base: dict, over: dict) -> dict:
+    """``over`` on top of ``base``, table by table (a nested table's keys are merged, not replaced)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = merge_tables(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
+__all__ = ["RobotProfile", "LidarModel", "OdometryModel", "ImuModel", "IDENTITY3", "Mat3", "Vec3",
+           "merge_tables"]

@@ -31,7 +31,7 @@ from .robot import IDENTITY3, Mat3, Vec3
 from .toml_io import from_dict, load_toml, save, to_dict
 
 __all__ = ["ExecutionModel", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
-           "load_stack_params", "save_stack_params"]
+           "load_stack_params", "save_stack_params", "default_stack_params", "stack_profile_path", "read_provenance"]
 
 
 def _finite(name: str, *values: float) -> None:
@@ -233,11 +233,34 @@ def _merge(base: dict, over: dict) -> dict:
 
 def load_stack_params(path: str | Path, base: StackParams | None = None) -> StackParams:
     """Read a StackParams TOML (any subset of keys). Missing keys come from ``base`` (default: the dataclass
-    defaults, i.e. SIMULATION). Unknown keys and bad values raise UserError naming the file and the key."""
+    defaults, i.e. SIMULATION). Unknown keys and bad values raise UserError naming the file and the key. A
+    ``[provenance]`` table (what made the file, e.g. ``bigcbf profile simulate``) is informational and ignored."""
     data = load_toml(path)
+    if isinstance(data.get("provenance"), dict):
+        data = {k: v for k, v in data.items() if k != "provenance"}
     if base is not None:
         data = _merge(to_dict(base), data)   # unknown keys can only come from the file: errors still name it
     return from_dict(StackParams, data, file=str(path))
+
+
+#: the stack uncertainty profiles the twin calibrated for the shipped robot profiles (``bigcbf profile simulate``),
+#: by robot profile name: bigcbf/profiles/stack/<robot>.toml
+def stack_profile_path(robot: str = "x3_sim") -> Path:
+    from .. import PROFILES
+    return PROFILES / "stack" / f"{robot}.toml"
+
+
+def default_stack_params(robot: str = "x3_sim", base: StackParams = SIMULATION) -> StackParams:
+    """What ``bigcbf run`` and ``bigcbf bench`` use without ``--profile``: the preset ``base`` (Table I) overlaid
+    with the stack profile the twin calibrated for the simulated robot ``robot`` (its tau95 and execution model;
+    ``stack_profile_path``)."""
+    return load_stack_params(stack_profile_path(robot), base=base)
+
+
+def read_provenance(path: str | Path) -> dict:
+    """The ``[provenance]`` table of a stack profile ({} when it has none)."""
+    prov = load_toml(path).get("provenance", {})
+    return prov if isinstance(prov, dict) else {}
 
 
 def save_stack_params(params: StackParams, path: str | Path, *, header: str = "") -> None:

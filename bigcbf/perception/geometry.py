@@ -65,7 +65,7 @@ class Cluster:
 def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
     """Scan-order segmentation of the valid points into clusters.
 
-    Consecutive points (i, i+1) join when d_i <= max(cluster_dist_m, r_i sin(dphi) / sin(lambda - dphi) + 3 sigma_r)
+    Consecutive points (i, i+1) join when d_i <= max(cluster_dist_m, r_i sin(dphi) / sin(lambda - dphi) + 3 sigma_r(r_i))
     (adaptive breakpoint detector, Borges & Aldon 2004; dphi the beam spacing), the adaptive term only for adjacent
     beams (missed beams between two points mean free space: then only cluster_dist_m). The scan is
     circular: the last point may join the first. A wall seen at a shallower angle than lambda breaks into fragments;
@@ -85,7 +85,8 @@ def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
     lam = params.cluster_lambda_rad
     # the adaptive distance only between adjacent beams: across missed beams there is free space between the points
     abd = np.where((dbeam == 1) & (dphi < lam),
-                   sp.ranges * np.sin(dphi) / np.sin(max(lam - dphi, 1e-9)) + 3 * params.range_sigma_m, 0.0)
+                   sp.ranges * np.sin(dphi) / np.sin(max(lam - dphi, 1e-9))
+                   + 3 * (params.range_sigma_m + params.range_sigma_frac * sp.ranges), 0.0)
     join = d <= np.maximum(params.cluster_dist_m, abd)
     if join.all():
         return [Cluster(np.arange(n), False)]
@@ -235,7 +236,8 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
     clamped to that range and the centre refitted with that radius (``fit_circle_fixed_radius``). Rectangle model:
     ``fit_rectangle`` (boxes, flat faces), its circumscribed circle. The circle model wins when
 
-    * its RMS residual is at most the rectangle's (plus range_sigma_m when the radius was not clamped: near-ties go
+    * its RMS residual is at most the rectangle's (plus the range noise's std at the cluster's mean range when the
+      radius was not clamped: near-ties go
       to the circle), and
     * the points span, seen from its centre, at least fit_min_arc_rad and, unless the cluster is partly hidden
       (``occluded``), at least fit_span_ratio of the arc that beams angle_increment apart sample on a circle of
@@ -251,7 +253,7 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
     near = points[k]
     ray = (near - sensor) / max(float(dist[k]), 1e-9)
     c, r, rms = fit_circle(points)
-    tol = params.range_sigma_m
+    tol = params.range_sigma_m + params.range_sigma_frac * float(dist.mean())
     if not (np.isfinite(r) and params.radius_min_m <= r <= params.radius_max_m and ray @ (c - near) > 0):
         r = float(np.clip(r if np.isfinite(r) else params.radius_max_m, params.radius_min_m, params.radius_max_m))
         c, rms = fit_circle_fixed_radius(points, r, near + r * ray)
@@ -304,3 +306,22 @@ def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: Per
     order = np.argsort(d, kind="stable")
     order = order[d[order] <= params.wall_range_m][: params.wall_max_points]
     return candidates[order]
+
+
+def wall_point_covariance(points: np.ndarray, sensor: np.ndarray, angle_increment: float,
+                          params: PerceptionParams) -> np.ndarray:
+    """Position covariance (M, 2, 2) [m^2] of LiDAR points at ``points`` (M, 2) seen from ``sensor`` (2,) (odom):
+    along the beam the range noise, sigma_r = range_sigma_m + range_sigma_frac r; across it the beam's angular
+    resolution at that range, sigma_t = r dphi / sqrt(12) (the return may come from anywhere within one angular step
+    dphi = ``angle_increment``: a uniform spread of width r dphi); rotated to the beam's bearing phi:
+    Sigma = R(phi) diag(sigma_r^2, sigma_t^2) R(phi)^T."""
+    d = np.asarray(points, float).reshape(-1, 2) - np.asarray(sensor, float)
+    r = np.hypot(d[:, 0], d[:, 1])
+    c, s = d[:, 0] / np.maximum(r, 1e-12), d[:, 1] / np.maximum(r, 1e-12)
+    sr2 = (params.range_sigma_m + params.range_sigma_frac * r) ** 2
+    st2 = (r * angle_increment) ** 2 / 12.0
+    cov = np.empty((len(r), 2, 2))
+    cov[:, 0, 0] = c * c * sr2 + s * s * st2
+    cov[:, 1, 1] = s * s * sr2 + c * c * st2
+    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (sr2 - st2)
+    return cov

@@ -18,7 +18,8 @@ Per scan, with the robot pose (odometry) at the scan's stamp:
    not match: two objects merged into one cluster) is represented by its wall points;
 5. the output is the confirmed tracks (at most max_tracks, nearest first; ids >= 0, r > 0, cov = KF position
    covariance, static flag with hysteresis, v = 0 when static) CONCATENATED with the wall points (at most
-   wall_max_points, within wall_range_m of the robot, nearest first; ids -1, r 0, v 0, static, cov = wall_cov_m2 I),
+   wall_max_points, within wall_range_m of the robot, nearest first; ids -1, r 0, v 0, static, cov from the scan:
+   range noise along the beam and the beam's angular resolution across it, ``geometry.wall_point_covariance``),
    one CBF constraint each.
 
 Why wall points: the CBF adds one constraint per obstacle, and a circle around a wall would either swallow the
@@ -43,14 +44,16 @@ import numpy as np
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
 from .geometry import (cluster_points, extent, measure_compact, scan_to_points, select_wall_points,
-                       wall_candidates)
+                       wall_candidates, wall_point_covariance)
 from .tracker import Tracker
 
 
-def wall_obstacles(points: np.ndarray, cov_m2: float) -> Obstacles:
-    """Wall points as obstacles: ids -1, radius 0, zero velocity, static, covariance cov_m2 I."""
+def wall_obstacles(points: np.ndarray, cov_m2) -> Obstacles:
+    """Wall points as obstacles: ids -1, radius 0, zero velocity, static; covariance ``cov_m2``: one per point
+    (M, 2, 2) [m^2], or a number c for c I."""
     m = len(points)
-    cov = np.broadcast_to(cov_m2 * np.eye(2), (m, 2, 2)).copy()
+    cov = (np.broadcast_to(float(cov_m2) * np.eye(2), (m, 2, 2)).copy() if np.ndim(cov_m2) == 0
+           else np.asarray(cov_m2, float).reshape(m, 2, 2))
     return Obstacles(np.asarray(points, float).reshape(m, 2), np.zeros((m, 2)), cov, np.zeros(m),
                      np.ones(m, bool), np.full(m, -1, int))
 
@@ -119,6 +122,7 @@ class Perception:
         walls += [wall_candidates(compact[k], robot, pr.wall_spacing_m) for k in rejected]
         wall_pts = select_wall_points(np.concatenate(walls) if walls else np.zeros((0, 2)), robot, pr)
         self.last_wall_points = wall_pts
-        out = self.tracker.obstacles(robot).concat(wall_obstacles(wall_pts, pr.wall_cov_m2))
+        wall_cov = wall_point_covariance(wall_pts, sp.sensor, sp.angle_increment, pr)
+        out = self.tracker.obstacles(robot).concat(wall_obstacles(wall_pts, wall_cov))
         self._last_ms = 1e3 * (time.perf_counter() - t0)
         return out

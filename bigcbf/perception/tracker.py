@@ -5,8 +5,14 @@ Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
+* classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits measurements
+  (default 1: from its second measurement on; a higher value suppresses phantom dynamic tracks, e.g. a 0.15 m bin
+  4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range noise, jumped 11 cm between its first two
+  fits and was classified dynamic at its fourth scan, but delays a pedestrian who appears near the robot: see
+  PerceptionParams.classify_after_hits);
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
-  pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted;
+  pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted; while it coasts,
+  its reported covariance is bounded by physics (:func:`coast_bound`);
 * at most max_candidates tracks are kept (the farthest are dropped); the output is the max_tracks confirmed tracks
   nearest to the robot (distance to their surface, |p - p_robot| - r).
 Association: cost = Euclidean distance between the predicted centre and a cluster centre; a pair is allowed when
@@ -14,6 +20,13 @@ its Mahalanobis distance squared (innovation covariance S = P_pos + R) is below 
 gate_min_m, never beyond gate_max_m, and only when the cluster's radius is within gate_radius_m of the track's (two
 objects merged into one cluster, e.g. a pedestrian passing a post, must not drag the post's track); the assignment
 minimising the total cost is scipy's linear_sum_assignment.
+
+Two filters per track. The constant-velocity Kalman filter (``kalman``) estimates every track's velocity and drives
+the static/dynamic classification; dynamic tracks report its position and covariance. Static tracks report a
+constant-position Kalman filter run beside it (state = position, a random walk of PSD ``static_pos_psd_m2ps``): a
+post does not move, and the CV model's acceleration noise (tuned for walkers) would inflate a post's covariance
+for nothing. When the two filters' positions disagree beyond gate_chi2 (Mahalanobis over the sum of their
+covariances: the object moves), the constant-position filter restarts from the CV filter's position and covariance.
 """
 from __future__ import annotations
 
@@ -27,7 +40,35 @@ from .kalman import kf_predict, kf_update, mahalanobis2
 
 _INFEASIBLE = 1e9
 
-_FIELDS = ("x", "P", "ids", "r", "hits", "misses", "confirmed", "static", "n_dyn", "n_stat", "last_hit")
+_FIELDS = ("x", "P", "xs", "Ps", "ids", "r", "hits", "misses", "confirmed", "static", "n_dyn", "n_stat", "last_hit",
+           "P_hit", "sv_hit")
+
+
+def coast_bound(tau, static, speed, sigma_v0, params: PerceptionParams) -> np.ndarray:
+    """How far [m] a track's object can have moved from where the prediction puts it after coasting tau seconds
+    without a measurement (physics, not statistics):
+
+    * static: 0 (a static object does not move);
+    * dynamic (a walking person): min((v_max + |v|) tau, a_max tau^2 / 2 + sigma_v0 tau). The person is within
+      v_max tau of where it was at the last update and the constant-velocity prediction within |v| tau of it;
+      with bounded acceleration its velocity stays within a_max tau of its value then, known to sigma_v0.
+
+    v_max = walk_speed_max_mps, a_max = walk_accel_max_mps2; all arguments broadcast."""
+    tau = np.maximum(np.asarray(tau, float), 0.0)
+    dyn = np.minimum((params.walk_speed_max_mps + np.asarray(speed, float)) * tau,
+                     0.5 * params.walk_accel_max_mps2 * tau * tau + np.asarray(sigma_v0, float) * tau)
+    return np.where(np.asarray(static, bool), 0.0, dyn)
+
+
+def cap_covariance(cov: np.ndarray, sigma_max) -> np.ndarray:
+    """Scale 2x2 covariances (N, 2, 2) down so that their largest standard deviation is at most sigma_max (N,)
+    (unchanged where it already is)."""
+    cov = np.asarray(cov, float)
+    a, b, c = cov[:, 0, 0], 0.5 * (cov[:, 0, 1] + cov[:, 1, 0]), cov[:, 1, 1]
+    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    cap = np.asarray(sigma_max, float) ** 2
+    k = np.where(lam > cap, cap / np.maximum(lam, 1e-300), 1.0)
+    return cov * k[:, None, None]
 
 
 class Tracker:
@@ -42,6 +83,10 @@ class Tracker:
         self.next_id = 0
         self.x = np.zeros((0, 4))
         self.P = np.zeros((0, 4, 4))
+        self.xs = np.zeros((0, 2))            # constant-position filter (static tracks): position
+        self.Ps = np.zeros((0, 2, 2))         # ... and its covariance
+        self.P_hit = np.zeros((0, 2, 2))      # reported position covariance at the last update
+        self.sv_hit = np.zeros(0)             # velocity std (largest) at the last update
         self.ids = np.zeros(0, int)
         self.r = np.zeros(0)
         self.hits = np.zeros(0, int)
@@ -66,7 +111,10 @@ class Tracker:
         P = np.zeros((m, 4, 4))
         P[:, 0, 0] = P[:, 1, 1] = pr.meas_sigma_m ** 2
         P[:, 2, 2] = P[:, 3, 3] = pr.init_vel_sigma_mps ** 2
-        new = dict(x=x, P=P, ids=self.next_id + np.arange(m), r=np.asarray(r, float), hits=np.ones(m, int),
+        R = pr.meas_sigma_m ** 2 * np.broadcast_to(np.eye(2), (m, 2, 2))
+        new = dict(x=x, P=P, xs=np.asarray(z, float).reshape(m, 2).copy(), Ps=R.copy(), P_hit=R.copy(),
+                   sv_hit=np.full(m, pr.init_vel_sigma_mps), ids=self.next_id + np.arange(m), r=np.asarray(r, float),
+                   hits=np.ones(m, int),
                    misses=np.zeros(m, int), confirmed=np.full(m, pr.confirm_hits <= 1), static=np.ones(m, bool),
                    n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t))
         self.next_id += m
@@ -77,6 +125,7 @@ class Tracker:
         """Propagate every track to time t (constant velocity, Eq. (2); covariance grows)."""
         if self.t is not None and len(self) and t > self.t:
             self.x, self.P = kf_predict(self.x, self.P, t - self.t, self.params.accel_psd_m2ps3)
+            self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)
         self.t = t
 
     def associate(self, z: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -110,6 +159,7 @@ class Tracker:
         if len(rows):
             x, P = kf_update(self.x[rows], self.P[rows], z[cols], pr.meas_sigma_m ** 2)
             self.x[rows], self.P[rows] = x, P
+            self._update_static_filter(rows, z[cols])
             a = pr.radius_smoothing
             self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
             self.hits[rows] += 1
@@ -119,7 +169,15 @@ class Tracker:
             v = x[:, 2:]
             st, nd, ns = hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
                                          np.linalg.norm(v, axis=1), speed_sigma(v, P[:, 2:, 2:]), pr)
+            # the classification starts once the velocity rests on more than classify_after_hits measurements: a
+            # young track's velocity is the difference of two or three noisy centres (module docstring)
+            young = self.hits[rows] <= pr.classify_after_hits
+            st = np.where(young, self.static[rows], st)
+            nd = np.where(young, 0, nd)
+            ns = np.where(young, 0, ns)
             self.static[rows], self.n_dyn[rows], self.n_stat[rows] = st, nd, ns
+            self.P_hit[rows] = np.where(st[:, None, None], self.Ps[rows], P[:, :2, :2])
+            self.sv_hit[rows] = np.sqrt(np.linalg.eigvalsh(P[:, 2:, 2:])[:, -1])
         missed = np.ones(len(self), bool)
         missed[rows] = False
         self.misses[missed] += 1
@@ -141,16 +199,49 @@ class Tracker:
             self._keep(np.sort(keep))
         return np.flatnonzero(rejected)
 
+    def _update_static_filter(self, rows: np.ndarray, z: np.ndarray) -> None:
+        """The constant-position filter's update with measurements z (module docstring), then its consistency check
+        against the CV filter (restart from it when they disagree beyond gate_chi2)."""
+        pr = self.params
+        R = pr.meas_sigma_m ** 2 * np.eye(2)
+        Ps = self.Ps[rows]
+        K = Ps @ np.linalg.inv(Ps + R)
+        xs = self.xs[rows] + np.einsum("nij,nj->ni", K, z - self.xs[rows])
+        IK = np.eye(2) - K
+        Ps = IK @ Ps @ IK.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
+        Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
+        Pc = self.P[rows, :2, :2]
+        moved = mahalanobis2(xs - self.x[rows, :2], Ps + Pc) > pr.gate_chi2
+        self.xs[rows] = np.where(moved[:, None], self.x[rows, :2], xs)
+        self.Ps[rows] = np.where(moved[:, None, None], Pc, Ps)
+
+    def reported(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position (K, 2) and covariance (K, 2, 2) of tracks ``idx`` as reported: the constant-position filter's
+        for static tracks, the CV filter's for dynamic ones; while coasting (no measurement at the current time),
+        the covariance is capped at the standard deviation of the last update plus :func:`coast_bound`."""
+        st = self.static[idx]
+        p = np.where(st[:, None], self.xs[idx], self.x[idx, :2])
+        cov = np.where(st[:, None, None], self.Ps[idx], self.P[idx, :2, :2])
+        tau = (self.t if self.t is not None else 0.0) - self.last_hit[idx]
+        coasting = tau > 1e-9
+        if coasting.any():
+            speed = np.linalg.norm(self.x[idx, 2:], axis=1)
+            lam0 = np.linalg.eigvalsh(self.P_hit[idx])[:, -1]
+            sigma_max = np.sqrt(np.maximum(lam0, 0.0)) + coast_bound(tau, st, speed, self.sv_hit[idx], self.params)
+            cov = np.where(coasting[:, None, None], cap_covariance(cov, sigma_max), cov)
+        return p, cov
+
     def surface_distance(self, robot_xy: np.ndarray) -> np.ndarray:
         return np.linalg.norm(self.x[:, :2] - robot_xy, axis=1) - self.r
 
     def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
-        """The confirmed tracks, at most max_tracks, nearest first (surface distance). Static tracks have v = 0."""
+        """The confirmed tracks, at most max_tracks, nearest first (surface distance). Static tracks have v = 0 and
+        the constant-position filter's position and covariance; coasting covariances are bounded (``reported``)."""
         idx = np.flatnonzero(self.confirmed)
         if len(idx) == 0:
             return Obstacles.empty()
         order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")][: self.params.max_tracks]
         v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
-        return Obstacles(self.x[order, :2].copy(), v, self.P[order, :2, :2].copy(), self.r[order].copy(),
-                         self.static[order].copy(), self.ids[order].copy())
+        p, cov = self.reported(order)
+        return Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy())
 

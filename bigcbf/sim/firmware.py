@@ -1,8 +1,10 @@
-"""The robot's firmware side: command latency and execution imperfections, wheel targets, wheel odometry.
+"""The robot's firmware side: command latency and execution imperfections, wheel targets, wheel odometry, and the
+encoder and gyro models the odometry reads.
 
 No MuJoCo here. The hardware-imperfection layer realises paper Eq. (1) on the simulated robot: the body twist
-actually sent to the wheels is ``A u + d + r`` (A 3x3, bias d, bounded residual r), applied after a latency
-``latency_s + U(0, latency_jitter_s)``; commands never overtake one another (a FIFO, like a serial link).
+actually sent to the wheels is ``A u + d + r + s`` (A 3x3, bias d, bounded residual r, lateral slip s), applied
+after a latency ``latency_s + U(0, latency_jitter_s)``; commands never overtake one another (a FIFO, like a serial
+link). The residual, the jitter and the slip each draw from their own random stream.
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from collections import deque
 
 import numpy as np
 
-from ..params.robot import RobotProfile
+from ..params.robot import ImuModel, OdometryModel, RobotProfile
 from ..types import RobotState
 from .kinematics import MecanumKinematics
 
@@ -19,9 +21,14 @@ from .kinematics import MecanumKinematics
 class ImperfectionLayer:
     """Eq. (1) plus latency: turns issued commands into executed body twists, in time order."""
 
-    def __init__(self, profile: RobotProfile, rng: np.random.Generator):
+    def __init__(self, profile: RobotProfile, rng: np.random.Generator, rng_jitter: np.random.Generator | None = None,
+                 rng_slip: np.random.Generator | None = None):
         self.profile = profile
         self.rng = rng
+        self.rng_jitter = rng if rng_jitter is None else rng_jitter
+        self.rng_slip = rng if rng_slip is None else rng_slip
+        self._slip = 0.0
+        self._slip_until = -np.inf
         self._A = np.asarray(profile.gain, float)
         self._d = np.asarray(profile.bias, float)
         self._rmax = np.asarray(profile.residual_max, float)
@@ -32,18 +39,27 @@ class ImperfectionLayer:
         self.current = np.zeros(3)
 
     def executed_twist(self, t: float, u) -> np.ndarray:
-        """Eq. (1) (3-axis form): A u + d + r, r uniform in [-residual_max, residual_max], held residual_hold_s."""
+        """Eq. (1) (3-axis form): A u + d + r + s, r uniform in [-residual_max, residual_max], held
+        residual_hold_s; s the lateral slip: sigma * ||u_xy|| across the commanded translation (to its left for
+        sigma > 0), sigma uniform in [-slip_max, slip_max], held slip_hold_s."""
+        u = np.asarray(u, float)
         if np.any(self._rmax > 0):
             if t >= self._residual_until:
                 self._residual = self.rng.uniform(-self._rmax, self._rmax)
                 self._residual_until = t + self.profile.residual_hold_s
-        return self._A @ np.asarray(u, float) + self._d + self._residual
+        out = self._A @ u + self._d + self._residual
+        if self.profile.slip_max > 0:
+            if t >= self._slip_until:
+                self._slip = float(self.rng_slip.uniform(-self.profile.slip_max, self.profile.slip_max))
+                self._slip_until = t + self.profile.slip_hold_s
+            out = out + self._slip * np.array([-u[1], u[0], 0.0])
+        return out
 
     def submit(self, t: float, u) -> float:
         """Issue command u at time t; returns the time at which the wheels will receive it."""
         delay = self.profile.latency_s
         if self.profile.latency_jitter_s > 0:
-            delay += self.rng.uniform(0.0, self.profile.latency_jitter_s)
+            delay += self.rng_jitter.uniform(0.0, self.profile.latency_jitter_s)
         apply_at = max(t + delay, self._last_apply)
         self._last_apply = apply_at
         self._queue.append((apply_at, self.executed_twist(t, u)))
@@ -93,3 +109,68 @@ class WheelOdometry:
 
     def state(self) -> RobotState:
         return RobotState(self.x, self.y, self.theta, *map(float, self.twist))
+
+
+class Encoders:
+    """Quadrature wheel encoders: the wheels' angles counted in steps of 2 pi / encoder_counts_per_rev, speeds from
+    count differences, scaled by (1 + scale_error) (the odometry's wheel radius is off by that fraction).
+
+    ``increment(w_mean, dt)`` -> the wheels' mean speeds over dt as the counts show them (the distance the
+    odometry integrates is exact to one count); ``speed()`` -> the speeds over the last ``window_s`` (at least one
+    block), what a firmware reports as the wheel speeds. With ``encoder_counts_per_rev = 0`` both are exact.
+    """
+
+    def __init__(self, model: OdometryModel, n: int = 4, window_s: float = 0.01):
+        self.model = model
+        self.quantum = 2 * math.pi / model.encoder_counts_per_rev if model.encoder_counts_per_rev else 0.0
+        self.scale = 1.0 + model.scale_error
+        self.window_s = window_s
+        self.angle = np.zeros(n)
+        self.count = np.zeros(n)
+        self.t = 0.0
+        self._hist: deque[tuple[float, np.ndarray]] = deque([(0.0, self.count.copy())])
+
+    @property
+    def exact(self) -> bool:
+        return self.quantum == 0.0
+
+    def increment(self, w_mean, dt: float) -> np.ndarray:
+        w_mean = np.asarray(w_mean, float)
+        if self.exact:
+            return w_mean * self.scale if self.scale != 1.0 else w_mean
+        self.angle += w_mean * dt
+        c = np.floor(self.angle / self.quantum)
+        dc, self.count = c - self.count, c
+        self.t += dt
+        h = self._hist
+        h.append((self.t, c))
+        while len(h) > 2 and h[1][0] <= self.t - self.window_s + 1e-12:
+            h.popleft()
+        return dc * (self.quantum / dt) * self.scale
+
+    def speed(self, w_now) -> np.ndarray:
+        """The reported wheel speeds: exact encoders report the current speeds ``w_now``."""
+        if self.exact:
+            w = np.asarray(w_now, float)
+            return w * self.scale if self.scale != 1.0 else w
+        (t0, c0), (t1, c1) = self._hist[0], self._hist[-1]
+        return (c1 - c0) * (self.quantum / max(t1 - t0, 1e-9)) * self.scale
+
+
+class Gyro:
+    """The yaw-rate gyro: mean true rate over dt + bias + white noise of density N (std N / sqrt(dt)); the bias is
+    drawn once, uniform in [-gyro_bias_max_radps, gyro_bias_max_radps], from its own stream."""
+
+    def __init__(self, model: ImuModel, rng_noise: np.random.Generator, rng_bias: np.random.Generator):
+        self.model = model
+        self.rng = rng_noise
+        self.bias = (float(rng_bias.uniform(-model.gyro_bias_max_radps, model.gyro_bias_max_radps))
+                     if model.gyro_bias_max_radps > 0 else 0.0)
+        self.last_noise = 0.0
+
+    def measure(self, rate_mean: float, dt: float) -> float:
+        if self.model.gyro_noise_density_radps_rthz > 0:
+            self.last_noise = float(self.rng.standard_normal()) * self.model.gyro_noise_density_radps_rthz / math.sqrt(dt)
+        elif self.bias == 0.0:
+            return rate_mean
+        return rate_mean + self.bias + self.last_noise

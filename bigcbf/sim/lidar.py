@@ -1,11 +1,12 @@
 """A simulated 2-D LiDAR: one ``mujoco.mj_multiRay`` call per scan, output shaped like sensor_msgs/LaserScan."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import mujoco
 import numpy as np
 
+from ..params.robot import LidarModel
 from ..types import LaserScan
 
 #: geom groups the LiDAR sees: 1 (walls, static obstacles) and 2 (pedestrians); not the floor (0), not the robot.
@@ -13,25 +14,22 @@ LIDAR_GEOMGROUP = np.array([0, 1, 1, 0, 0, 0], dtype=np.uint8)
 
 
 @dataclass(frozen=True)
-class LidarConfig:
-    n_beams: int = 360
-    rate_hz: float = 10.0
-    range_min_m: float = 0.12
-    range_max_m: float = 8.0
-    range_noise_std_m: float = 0.0     # Gaussian range noise (0: exact ranges)
+class LidarConfig(LidarModel):
+    """The LiDAR model of the robot profile (``bigcbf.params.robot.LidarModel``: beams, rate, range limits, range
+    noise) plus the MJCF site it is mounted at."""
+
     site: str = "lidar"
 
-    def __post_init__(self):
-        if self.n_beams < 1 or self.rate_hz <= 0 or not (0 <= self.range_min_m < self.range_max_m):
-            raise ValueError("LiDAR needs n_beams >= 1, rate_hz > 0 and 0 <= range_min_m < range_max_m")
-        if self.range_noise_std_m < 0:
-            raise ValueError("range_noise_std_m must be >= 0")
+    @classmethod
+    def from_model(cls, model: LidarModel, site: str = "lidar") -> "LidarConfig":
+        return cls(**{f.name: getattr(model, f.name) for f in fields(LidarModel)}, site=site)
 
 
 class Lidar:
-    """360 beams over 360 degrees in the laser frame (x forward, counter-clockwise), angle_min = -pi.
+    """n_beams beams over 360 degrees in the laser frame (x forward, counter-clockwise), angle_min = -pi.
 
-    Beams that hit nothing within range_max, or closer than range_min, report inf (REP 117).
+    Beams that hit nothing within range_max, or closer than range_min, report inf (REP 117). Range noise: Gaussian
+    with std ``range_noise_std_m + range_noise_frac * r`` (``LidarModel``), drawn from the LiDAR's own stream.
     """
 
     def __init__(self, model: mujoco.MjModel, config: LidarConfig = LidarConfig(), rng: np.random.Generator | None = None):
@@ -58,8 +56,8 @@ class Lidar:
         mujoco.mj_multiRay(self.model, data, pnt, self._vec, LIDAR_GEOMGROUP, 1, -1, self._geomid, self._dist,
                            None, cfg.n_beams, cfg.range_max_m)
         r = self._dist.copy()
-        if cfg.range_noise_std_m > 0:
-            r = r + self.rng.normal(0.0, cfg.range_noise_std_m, r.shape)
+        if cfg.range_noise_std_m > 0 or cfg.range_noise_frac > 0:
+            r = r + self.rng.standard_normal(r.shape) * cfg.range_sigma(np.maximum(r, 0.0))
         bad = (self._geomid < 0) | (self._dist < 0) | (r > cfg.range_max_m) | (r < cfg.range_min_m)
         r[bad] = np.inf
         return LaserScan(stamp=float(data.time if stamp is None else stamp), angle_min=self.angle_min,

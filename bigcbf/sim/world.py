@@ -15,7 +15,7 @@ import numpy as np
 
 from ..params.robot import RobotProfile
 from ..types import LaserScan, RobotState
-from .firmware import ImperfectionLayer, WheelOdometry
+from .firmware import Encoders, Gyro, ImperfectionLayer, WheelOdometry
 from .kinematics import MecanumKinematics
 from .lidar import Lidar, LidarConfig
 from .scene import SceneSpec, build_model, open_room
@@ -31,9 +31,14 @@ def _yaw(quat_wxyz) -> float:
 class SimWorld:
     """One episode's physics. Deterministic for a given scene, profile, seed and command sequence."""
 
+    #: the random streams, one per noise source (SeedSequence children keep their index: adding a source at the end
+    #: changes none of the others)
+    STREAMS = ("residual", "lidar", "latency_jitter", "slip", "gyro_noise", "gyro_bias")
+
     def __init__(self, scene: SceneSpec | None = None, profile: RobotProfile = RobotProfile(), seed: int = 0,
-                 lidar: LidarConfig = LidarConfig(), kinematics: MecanumKinematics = MecanumKinematics(),
+                 lidar: LidarConfig | None = None, kinematics: MecanumKinematics = MecanumKinematics(),
                  model: mujoco.MjModel | None = None):
+        """``lidar``: the LiDAR's configuration; None takes the robot profile's LiDAR model."""
         self.scene = scene or open_room()
         if profile.floor_friction is not None:
             from dataclasses import replace
@@ -43,10 +48,14 @@ class SimWorld:
         self.profile = profile
         self.kin = kinematics
         # independent random streams, so that e.g. LiDAR noise does not change the execution residuals
-        ss = np.random.SeedSequence(seed)
-        rng_exec, rng_lidar = (np.random.default_rng(s) for s in ss.spawn(2))
-        self.imperfection = ImperfectionLayer(profile, rng_exec)
-        self.lidar = Lidar(self.model, lidar, rng_lidar)
+        rng = dict(zip(self.STREAMS, (np.random.default_rng(s)
+                                      for s in np.random.SeedSequence(seed).spawn(len(self.STREAMS)))))
+        self.imperfection = ImperfectionLayer(profile, rng["residual"], rng["latency_jitter"], rng["slip"])
+        if lidar is None:
+            lidar = LidarConfig.from_model(profile.lidar)
+        self.lidar = Lidar(self.model, lidar, rng["lidar"])
+        self.encoders = Encoders(profile.odometry)
+        self.gyro = Gyro(profile.imu, rng["gyro_noise"], rng["gyro_bias"])
         m = self.model
         self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{w}_wheel") for w in WHEELS])
         self._wheel_dof = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{w}_wheel")]
@@ -110,8 +119,9 @@ class SimWorld:
             w0, g0 = d.qvel[self._wheel_dof].copy(), float(d.sensordata[self._imu_gyro + 2])
             mujoco.mj_step(m, d, nb)
             w1 = d.qvel[self._wheel_dof]
-            self.odometry.update(0.5 * (w0 + w1), nb * dt, 0.5 * (g0 + float(d.sensordata[self._imu_gyro + 2])),
-                                 measured=w1)
+            w_mean = self.encoders.increment(0.5 * (w0 + w1), nb * dt)
+            gyro = self.gyro.measure(0.5 * (g0 + float(d.sensordata[self._imu_gyro + 2])), nb * dt)
+            self.odometry.update(w_mean, nb * dt, gyro, measured=self.encoders.speed(w1))
             n -= nb
 
     def advance(self, duration_s: float) -> None:
@@ -145,8 +155,10 @@ class SimWorld:
 
     def imu(self) -> dict:
         s = self.data.sensordata
+        gyro = s[self._imu_gyro:self._imu_gyro + 3].copy()
+        gyro[2] += self.gyro.bias + self.gyro.last_noise       # the yaw axis as the gyro model reads it
         return {"orientation": tuple(s[self._imu_quat:self._imu_quat + 4]),
-                "angular_velocity": tuple(s[self._imu_gyro:self._imu_gyro + 3]),
+                "angular_velocity": tuple(gyro),
                 "linear_acceleration": tuple(s[self._imu_acc:self._imu_acc + 3])}
 
     #: the sensor frames the stack's messages use (REP 105 names) and the model's sites that carry them

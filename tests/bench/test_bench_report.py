@@ -144,6 +144,21 @@ def test_paper_numbers_match_the_paper_source():
     assert set(found) == set(paper.METHOD_ORDER)
     for m, vals in found.items():
         assert [paper.PAPER_TABLE_II[m][k] for k in paper.TABLE2_KEYS] == vals
+    # Table III (hardware): "k/15" then five numbers
+    body = tex.read_text().split(r"\label{tab:real_results}")[1].split(r"\bottomrule")[0]
+    found = {}
+    for line in body.splitlines():
+        m = re.match(r"\s*(.+?)\s*&(.+)\\\\", line)
+        if not m or "Method" in line or "(s)" in line:
+            continue
+        name = re.sub(r"\\textbf\{(.+?)\}", r"\1", m.group(1)).strip()
+        cells = [re.sub(r"\\textbf\{(.+?)\}", r"\1", v).strip() for v in m.group(2).split("&")]
+        k, n = cells[0].split("/")
+        found[names[name]] = [int(k), int(n)] + [float(c) for c in cells[1:]]
+    assert set(found) == set(paper.METHOD_ORDER)
+    for m, vals in found.items():
+        t = paper.PAPER_TABLE_III[m]
+        assert [t["successes"], t["trials"]] + [t[k] for k in paper.TABLE3_KEYS[1:]] == vals
 
 
 def test_order():
@@ -161,3 +176,36 @@ def test_rows_of_several_code_versions_are_flagged(tmp_path):
     rows[1]["code_sha"] = "aaa"
     report.write_reports(tmp_path, rows, ["big-cbf"], ["a", "b"], [0, 1])
     assert "Warning" not in (tmp_path / "summary.md").read_text()
+
+
+def test_summarize_activation_both_ways_infeasible_share_and_margins():
+    rows = [row("a", "big-cbf", 0, cbf_active_ratio=0.2, control_steps=100, e_cbf=2.0, e_cbf_infeasible=1.0,
+                m_img_mean_m=0.2, m_img_p90_m=0.3, m_exec_mean_m=0.25, m_exec_p90_m=0.35),
+            row("a", "big-cbf", 1, cbf_active_ratio=0.0, control_steps=900, e_cbf=0.0, e_cbf_infeasible=0.0,
+                m_img_mean_m=0.4, m_img_p90_m=0.5, m_exec_mean_m=0.15, m_exec_p90_m=0.25),
+            row("a", "dwa", 0, cbf_active_ratio=0.5, control_steps=100, e_cbf=4.0, e_cbf_infeasible=0.0,
+                m_img_mean_m=None, m_img_p90_m=None, m_exec_mean_m=0.1, m_exec_p90_m=0.2)]
+    s = report.summarize(rows[:2])
+    # pooled: 20 active steps of 1000 = 2 %; episode mean: (20 % + 0 %) / 2 = 10 % (the stalled episode dilutes)
+    assert s["cbf_active_pct"] == pytest.approx(2.0) and s["cbf_active_episode_pct"] == pytest.approx(10.0)
+    assert s["e_cbf_infeasible_share_pct"] == pytest.approx(50.0)
+    assert (s["m_img_mean_m"], s["m_img_p90_m"]) == (pytest.approx(0.3), pytest.approx(0.4))
+    assert (s["m_exec_mean_m"], s["m_exec_p90_m"]) == (pytest.approx(0.2), pytest.approx(0.3))
+    d = report.summarize(rows[2:])
+    assert d["m_img_mean_m"] is None and d["e_cbf_infeasible_share_pct"] == 0.0
+    md = report.summary_markdown(report.build_summary(rows, ["dwa", "big-cbf"], ["a"], [0, 1]))
+    assert "E_CBF from infeasible (%)" in md and "0.300 / 0.400" in md
+
+
+def test_hardware_suite_report_is_beside_table_iii(tmp_path):
+    from bigcbf.bench.suites import SUITES
+    suite = SUITES.get("hardware")
+    assert suite.default_seeds == 20 and [e.scenario for e in suite.entries(tmp_path)] == list(
+        paper.HARDWARE_SCENARIO_ORDER)
+    rows = [row(s, "big-cbf", k, success=k < 2, time_s=12.0) for s in paper.HARDWARE_SCENARIO_ORDER for k in range(3)]
+    summary = report.build_summary(rows, ["big-cbf"], list(paper.HARDWARE_SCENARIO_ORDER), [0, 1, 2],
+                                   {"suite": "hardware"})
+    md = report.summary_markdown(summary)
+    assert "Table III" in md and "Table II\n" not in md
+    assert "| BIG-CBF | 9 | 6/9 (66.7) / 15/15 (100.0) | 12.00 / 13.18 |" in md
+    assert paper.PAPER_TABLE_III["apf"]["success_pct"] == pytest.approx(100 / 15)

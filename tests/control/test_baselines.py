@@ -7,7 +7,7 @@ from bigcbf.control import METHODS, PlanInfo, Planner
 from bigcbf.control.baselines import BASELINES
 from bigcbf.control.baselines.apf import ApfParams, attractive_velocity, repulsive_velocity
 from bigcbf.control.baselines.backup_cbf import BackupCbfPlanner
-from bigcbf.control.baselines.common import accel_limited, barrier_along, integrate, predict
+from bigcbf.control.baselines.common import Geometry, accel_limited, barrier_along, integrate, predict
 from bigcbf.control.baselines.dwa import DwaParams, window_samples
 from bigcbf.control.baselines.mppi import MppiPlanner, effective_sample_size, mppi_weights, temperature
 from bigcbf.control.baselines.pl_cbf import PlCbfPlanner
@@ -120,13 +120,14 @@ def test_integrate_and_barrier_by_hand():
     # u = (0.5, 0, 0) at theta = pi/2 for 2 steps of 0.1 s: +y by 0.05 m per step
     p, th = integrate(RobotState(1.0, 2.0, np.pi / 2), np.tile([0.5, 0.0, 0.0], (1, 2, 1)), 0.1, P)
     np.testing.assert_allclose(p[0], [[1.0, 2.0], [1.0, 2.05], [1.0, 2.10]], atol=1e-12)
-    # barrier at k = 0 against a static obstacle at (1, 3), r = 0.2, cov 0, static:
-    # m = |v_rob| tau95 + e_exec + e_zoh = 0.5*0.1 + 0.15*(0.02 + 0.02*0.5/0.8) + 0.025 = 0.05 + 0.004875 + 0.025
-    # D = 0.15 + 0.2 + 0.1 + 0.079875 = 0.529875; h = 1 - D^2
+    # the method's own barrier at k = 0 against a static obstacle at (1, 3), r = 0.2: D = 0.15 + 0.2 + margin 0.1
+    # = 0.45 (no shared uncertainty m_i: that is the common CBF's); h = 1 - D^2; with scale 1.01: D = 1.01 * 0.35
     obs = Obstacles.from_lists([[1.0, 3.0]], r=0.2)
-    h = barrier_along(p, th, np.tile([0.5, 0.0, 0.0], (1, 2, 1)), predict(obs, P, 2, 0.1), P)
-    assert h[0, 0, 0] == pytest.approx(1.0 - 0.529875 ** 2)
-    assert h[0, 2, 0] == pytest.approx(0.9 ** 2 - 0.529875 ** 2)
+    h = barrier_along(p, predict(obs, P, 2, 0.1), P, Geometry(0.1))
+    assert h[0, 0, 0] == pytest.approx(1.0 - 0.45 ** 2)
+    assert h[0, 2, 0] == pytest.approx(0.9 ** 2 - 0.45 ** 2)
+    h = barrier_along(p, predict(obs, P, 2, 0.1), P, Geometry(0.0, 1.01))
+    assert h[0, 0, 0] == pytest.approx(1.0 - (1.01 * 0.35) ** 2)
 
 
 def test_accel_limited_and_brake_rollout_by_hand():
@@ -158,11 +159,10 @@ def test_backup_cbf_keeps_nominal_far_and_intervenes_near():
     u, info = pl.plan(0.0, RobotState(0, 0, 0), far, GOAL)
     assert info.mode == "NOMINAL"
     np.testing.assert_allclose(u, [0.8, 0.0, 0.0])
-    # obstacle 0.7 m ahead, r 0.3. Stopped at the end of the brake, m = 0.15 * 0.02 + 0.025 = 0.028, so
-    # D = 0.15 + 0.3 + 0.1 + 0.028 = 0.578 m.
-    # lambda = 0: one step at 0.8 -> 0.04, brake 0.6, 0.4, 0.2, 0 -> 0.10, 0.14, 0.16: 0.7 - 0.16 = 0.54 < D: unsafe
-    # lambda = 0.25: 0.6 m/s -> 0.03, brake 0.4, 0.2, 0 -> 0.07, 0.09: 0.7 - 0.09 = 0.61 > D: certified
-    near = Obstacles.from_lists([[0.7, 0.0]], r=0.3)
+    # obstacle 0.6 m ahead, r 0.3; the method's own geometry D = r_R + r_i = 0.15 + 0.3 = 0.45 m.
+    # lambda = 0: one step at 0.8 -> 0.04, brake 0.6, 0.4, 0.2, 0 -> 0.10, 0.14, 0.16: 0.6 - 0.16 = 0.44 < D: unsafe
+    # lambda = 0.25: 0.6 m/s -> 0.03, brake 0.4, 0.2, 0 -> 0.07, 0.09: 0.6 - 0.09 = 0.51 > D: certified
+    near = Obstacles.from_lists([[0.6, 0.0]], r=0.3)
     u, info = pl.plan(0.0, RobotState(0, 0, 0), near, GOAL)
     assert info.mode == "BLEND"
     np.testing.assert_allclose(u, [0.6, 0.0, 0.0])

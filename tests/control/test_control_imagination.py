@@ -167,3 +167,26 @@ def test_empty_scene():
     assert np.all(np.isinf(img.h_min)) and np.all(img.W == 0)
     assert img.accepted.tolist() == [True] * 5 + [False]
     assert img.P[0] == pytest.approx(img.P.max())
+
+
+@pytest.mark.parametrize("params", [IMPERFECT, PHYSICAL])
+@pytest.mark.parametrize("shared", [True, False])
+def test_margins_are_kappa_img_m_i_eq_14_15(params, shared):
+    """Imagination.margin[b, k, i] = D_i - (r_R + r_i + d0): kappa_img m_i (Eq. 15 at the imagined yaw, the command
+    that moves the robot from state k (u_{N-1} at the terminal state) and the predicted covariance), or NoShared's
+    fixed margin."""
+    state, obs, goal = scene(4)
+    img = imagine(state, obs, goal, params, modes=MODES7, shared=shared)
+    unc = params.uncertainty
+    N = params.N
+    _, cov = predict_obstacles(obs, N, params.dt_s, q_sigma_for(obs, unc))
+    dyn = bool(np.any(~obs.static & (obs.ids >= 0)))
+    kap = unc.kappa_img if (unc.kappa_img_static is None or dyn) else unc.kappa_img_static
+    assert img.margin.shape == (len(MODES7), N + 1, len(obs))
+    for b in range(len(MODES7)):
+        for k in range(N + 1):
+            u = img.u[b, min(k, N - 1)]
+            for i in range(len(obs)):
+                want = (kap * uncertainty_radius(img.theta[b, k], u, obs.v[i], cov[k, i], unc) if shared
+                        else params.noshared_margin_m)
+                assert img.margin[b, k, i] == pytest.approx(float(want), rel=1e-9, abs=1e-12)

@@ -75,3 +75,32 @@ def test_perf_provider():
     for key in ("imagination_p95_ms", "cbf_qp_p95_ms"):
         assert out[key] > 0
     assert out["cbf_qp_rows_mean"] == 8.0          # the benchmark does solve QPs with 8 obstacle rows
+
+
+def test_margin_stats_and_infeasible_energy_by_hand():
+    from bigcbf.control.metrics import margin_stats
+    assert margin_stats([]) == (None, None)
+    # 0.1 .. 1.0: mean 0.55, 90th percentile (linear interpolation) 0.1 + 0.9 * 0.9 = 0.91
+    mean, p90 = margin_stats(np.arange(1, 11) / 10)
+    assert mean == pytest.approx(0.55) and p90 == pytest.approx(0.91)
+    P = SIMULATION
+    f = lambda infeasible, m: FilterInfo(True, infeasible, None, 0.1, 1, 0.1, np.zeros(1), margins=np.array(m))
+    steps = [step_metrics([0.8, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", True, 1.0, margins_img=np.array([0.3, 0.5])),
+                          f(False, [0.2]), P),
+             step_metrics([0.5, 0.2, 0], [0.0, 0, 0], PlanInfo("GOAL", False, 0.1), f(True, [0.4, 0.6]), P)]
+    s = summarize(steps)
+    assert s.e_cbf_infeasible == pytest.approx(0.29) and s.e_cbf == pytest.approx(0.38)
+    assert s.m_img_mean_m == pytest.approx(0.4) and s.m_exec_mean_m == pytest.approx(0.4)
+    assert s.m_exec_p90_m == pytest.approx(np.percentile([0.2, 0.4, 0.6], 90))
+
+
+def test_filter_reports_kappa_exec_m_i_of_its_rows():
+    from dataclasses import replace
+    from bigcbf.control.uncertainty import uncertainty_radius
+    params = replace(SIMULATION, uncertainty=replace(SIMULATION.uncertainty, kappa_exec=0.7))
+    obs = Obstacles.from_lists([[1.0, 0.2], [-1.5, 0.5]], v=[[0.0, 0.0], [0.3, -0.2]], r=[0.2, 0.25],
+                               cov=np.eye(2) * 0.01, static=[True, False])
+    state, u = RobotState(0.0, 0.0, 0.3), np.array([0.5, 0.1, 0.0])
+    _, info = CbfFilter(params).filter(state, obs, u)
+    want = [0.7 * uncertainty_radius(0.3, u, obs.v[i], obs.cov[i], params.uncertainty) for i in range(2)]
+    np.testing.assert_allclose(info.margins, want, rtol=1e-12)

@@ -154,3 +154,17 @@ def test_select_wall_points_nearest_first_bounded():
     assert len(sel) == 10 and np.all(np.diff(d) >= 0) and d[0] == pytest.approx(1.0)
     far = select_wall_points(pts + [0, 5], np.zeros(2), p)
     assert len(far) == 0                                    # all beyond wall_range_m
+
+
+def test_wall_point_covariance_by_hand():
+    from bigcbf.perception.geometry import wall_point_covariance
+    p = PerceptionParams(range_sigma_m=0.005, range_sigma_frac=0.005)
+    dphi = np.pi / 180
+    # straight ahead along +y at 2 m: along the beam (0.005 + 0.01)^2, across it (2 dphi)^2 / 12
+    cov = wall_point_covariance(np.array([[0.0, 2.0], [3.0, 3.0]]), np.zeros(2), dphi, p)
+    np.testing.assert_allclose(cov[0], np.diag([(2 * dphi) ** 2 / 12, 0.015 ** 2]), atol=1e-15)
+    # at 45 degrees: eigenvalues the same two variances at that range, eigenvector of the larger along the beam
+    r = np.hypot(3.0, 3.0)
+    w, v = np.linalg.eigh(cov[1])
+    np.testing.assert_allclose(sorted(w), sorted([(r * dphi) ** 2 / 12, (0.005 + 0.005 * r) ** 2]), rtol=1e-12)
+    assert abs(abs(v[:, np.argmax(w)] @ np.array([1, 1]) / np.sqrt(2)) - 1) < 1e-12

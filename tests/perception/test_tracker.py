@@ -70,3 +70,96 @@ def test_capacity_keeps_the_nearest():
     obs = tr.obstacles(ORIGIN)
     assert obs.p[:, 0].tolist() == [1.0, 2.0]
     assert obs.cov.shape == (2, 2, 2) and np.all(obs.r == pytest.approx(0.2))
+
+
+# --- covariances: the static objects' filter and the physical bound of coasting tracks ----------------------------
+
+def test_coast_bound_by_hand():
+    from bigcbf.perception.tracker import coast_bound
+    p = PerceptionParams(walk_speed_max_mps=2.0, walk_accel_max_mps2=2.5)
+    # static: does not move
+    assert coast_bound(1.0, True, 0.0, 0.5, p) == 0.0
+    # dynamic, |v| = 1, sigma_v0 = 0.1: tau = 0.5 -> min(3 * 0.5, 1.25 * 0.25 + 0.05) = 0.3625
+    assert coast_bound(0.5, False, 1.0, 0.1, p) == pytest.approx(0.3625)
+    # tau = 2 -> min(3 * 2, 1.25 * 4 + 0.2) = 5.2; with sigma_v0 = 1.5: min(6, 5 + 3) = 6 (the speed bound)
+    assert coast_bound(2.0, False, 1.0, 0.1, p) == pytest.approx(5.2)
+    assert coast_bound(2.0, False, 1.0, 1.5, p) == pytest.approx(6.0)
+
+
+def test_cap_covariance_by_hand():
+    from bigcbf.perception.tracker import cap_covariance
+    cov = np.array([[[0.09, 0.0], [0.0, 0.01]], [[0.01, 0.0], [0.0, 0.01]]])
+    out = cap_covariance(cov, np.array([0.2, 0.2]))
+    np.testing.assert_allclose(out[0], [[0.04, 0.0], [0.0, 0.01 * 0.04 / 0.09]])
+    np.testing.assert_allclose(out[1], cov[1])                 # already within: unchanged
+
+
+def test_static_track_covariance_is_the_constant_position_filters():
+    """A post measured at 10 Hz: the reported covariance converges to the constant-position filter's steady state,
+    P = (-a + sqrt(a^2 + 4 a R)) / 2 with a = q dt = 1e-4 m^2, R = 0.05^2 (P^2 + a P - a R = 0): 4.525e-4 m^2."""
+    tr = _tracker(confirm_hits=1)
+    rng = np.random.default_rng(0)
+    for k in range(60):
+        tr.step(0.1 * k, np.array([[2.0, 1.0]]) + rng.normal(0, 0.05, (1, 2)), np.array([0.2]), ORIGIN)
+    obs = tr.obstacles(ORIGIN)
+    a, R = 1e-3 * 0.1, 0.05 ** 2
+    steady = (-a + np.sqrt(a * a + 4 * a * R)) / 2
+    assert obs.static[0]
+    np.testing.assert_allclose(obs.cov[0], steady * np.eye(2), rtol=1e-3, atol=1e-9)
+    assert np.linalg.norm(obs.p[0] - [2.0, 1.0]) < 0.04
+
+
+def test_hidden_post_does_not_swell_and_hidden_walker_is_bounded():
+    """A static post hidden behind a nearer object coasts with the covariance of its last update (it does not move:
+    before the bound its CV covariance grew to 1.2-1.3 m rings of beta sigma); a coasting walker's standard deviation
+    stays within its last update's plus coast_bound."""
+    from bigcbf.perception.tracker import coast_bound
+    p = PerceptionParams(confirm_hits=1, coast_s=1.0)
+    tr = Tracker(p)
+    for k in range(30):                                     # post at (2, 0), walker along x at 1 m/s
+        tr.step(0.1 * k, np.array([[2.0, 0.0], [0.1 * k, 3.0]]), np.array([0.1, 0.25]), ORIGIN)
+    before = tr.obstacles(ORIGIN)
+    post = int(np.flatnonzero(before.static)[0])
+    walker = int(np.flatnonzero(~before.static)[0])
+    sigma_w0 = np.sqrt(np.linalg.eigvalsh(tr.P_hit[walker])[-1])
+    sv0, speed = tr.sv_hit[walker], np.linalg.norm(tr.x[walker, 2:])
+    for k in range(1, 10):                                  # both hidden for 0.9 s
+        t = 2.9 + 0.1 * k
+        tr.step(t, np.zeros((0, 2)), np.zeros(0), ORIGIN)
+        obs = tr.obstacles(ORIGIN)
+        i = int(np.flatnonzero(obs.ids == before.ids[post])[0])
+        np.testing.assert_allclose(obs.cov[i], before.cov[post], rtol=1e-12)
+        j = int(np.flatnonzero(obs.ids == before.ids[walker])[0])
+        bound = sigma_w0 + coast_bound(0.1 * k, False, speed, sv0, p)
+        assert np.sqrt(np.linalg.eigvalsh(obs.cov[j])[-1]) <= bound + 1e-12
+    # without the bound the CV filter's own covariance of the post would have grown (accel PSD 0.5 over 0.9 s)
+    assert np.sqrt(np.linalg.eigvalsh(tr.P[post, :2, :2])[-1]) > 3 * np.sqrt(np.linalg.eigvalsh(before.cov[post])[-1])
+
+
+def test_static_track_that_starts_moving_follows_it():
+    """The constant-position filter restarts from the CV filter when they disagree (gate_chi2): a standing person
+    who starts walking is not reported where it stood."""
+    tr = _tracker(confirm_hits=1)
+    errs = []
+    for k in range(40):
+        x = 2.0 + max(0.0, 0.1 * (k - 20))                 # stands 2 s, then walks at 1 m/s
+        tr.step(0.1 * k, np.array([[x, 1.0]]), np.array([0.25]), ORIGIN)
+        errs.append(np.linalg.norm(tr.obstacles(ORIGIN).p[0] - [x, 1.0]))
+    assert max(errs) < 0.3 and not tr.obstacles(ORIGIN).static[0]
+
+
+def test_young_track_is_not_classified_on_its_first_noisy_centres():
+    """A static bin whose first fitted centre is 11 cm off (few beams, range noise): the velocity of its first
+    updates is that jump, not motion; with classify_after_hits = 3 the classification waits until the velocity
+    rests on more than 3 measurements (from the second measurement on, it is classified dynamic at its fourth)."""
+    old = _tracker(confirm_hits=3, classify_after_hits=1)
+    for k, z in enumerate(([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])):
+        old.step(0.1 * k, np.array([z]), np.array([0.15]), ORIGIN)
+    assert not old.static[0]
+    tr = _tracker(confirm_hits=3, classify_after_hits=3)
+    rng = np.random.default_rng(1)
+    tr.step(0.0, np.array([[4.36, -0.905]]), np.array([0.15]), ORIGIN)
+    tr.step(0.1, np.array([[4.47, -0.945]]), np.array([0.15]), ORIGIN)
+    for k in range(2, 20):
+        tr.step(0.1 * k, np.array([[4.53, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
+        assert tr.static[0], f"classified dynamic at update {k + 1}"

@@ -73,11 +73,13 @@ def test_fit_moves_the_model_toward_the_log(profile_drive, profile):
     """Nelder-Mead from the nominal profile on 6 s of the drive: the error drops, the latency moves toward the
     truth (0.09 s on average). The gains are not asserted: 6 s of the program with +-0.03 m/s residual noise do
     not pin them (16, 30 and 60 evaluations gave vx gains 1.13, 1.04, 1.04 for a true 0.9); the least-squares
-    calibration on the whole log identifies them (test_calibrated_replay_beats_nominal)."""
+    calibration on the whole log identifies them (test_calibrated_replay_beats_nominal). 24 evaluations: since the
+    latency jitter and the residual draw from separate random streams, 16 stopped at 0.82 of the nominal error on
+    this drive (24: 0.74)."""
     from twin.replay import fit_profile, run_profile
     data = _first(read_log(profile_drive[0], use_scan=False), 6.0)
     scene = scene_for(data.odom.pose[:, :2])
-    opt = ReplayOptions(fit=True, fit_window_s=6.0, fit_evals=16)
+    opt = ReplayOptions(fit=True, fit_window_s=6.0, fit_evals=24)
     start = RobotProfile()
     before = run_profile("nominal", data, start, opt.window_s, scene=scene)
     fitted = fit_profile(data, start, opt, scene)

@@ -7,8 +7,10 @@ velocity (first-order, "velocity = force" form used for velocity-controlled mobi
   conic (k_att d_conic ||p - p_g||) beyond, so -grad U_att = k_att e inside and k_att d_conic e/||e|| outside
   (e = p_g - p): bounded far away, vanishing at the goal.
 * Repulsion (:func:`repulsive_velocity`), Khatib's FIRAS form: U_rep,i = 1/2 k_rep (1/rho_i - 1/rho_0)^2 for
-  rho_i <= rho_0, 0 beyond, with rho_i = ||q_i|| - D_i the distance to obstacle i's *inflated* radius D_i
-  (Eq. 14; m_i of Eq. 15 evaluated at the robot's current velocity, kappa_exec), so
+  rho_i <= rho_0, 0 beyond, with rho_i = ||q_i|| - D_i the distance between the robot's and the obstacle's
+  surfaces, D_i = r_R + r_i (Khatib's rho is the shortest distance to the obstacle; the method's standoff comes
+  from its influence distance rho_0, no extra margin: ``margin_m`` 0; the shared uncertainty m_i of Eq. (15) is
+  BIG-CBF's, applied to every method by the common hard CBF downstream), so
   -grad U_rep,i = k_rep (1/rho_i - 1/rho_0) / rho_i^2 q_i/||q_i||. rho_i is floored at ``rho_min_m`` (the
   field stays finite when the estimate is already inside D_i).
 * Obstacles are taken where the shared prediction (Eq. 2) puts them ``lookahead_s`` ahead (the current estimate
@@ -28,8 +30,7 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
-from ..uncertainty import inflated_radius, uncertainty_radius
-from .common import at_goal, body_from_world, clip_command
+from .common import Geometry, at_goal, body_from_world, clip_command
 
 _TINY = 1e-12
 
@@ -37,7 +38,7 @@ _TINY = 1e-12
 @dataclass(frozen=True)
 class ApfParams:
     """k_att 1 1/s with a 0.8 m conic radius: full speed 0.8 m/s beyond 0.8 m from the goal.
-    k_rep 0.01 m^3/s and rho_0 0.6 m: 0.19 m/s push at 0.3 m from the inflated radius, 0.83 m/s at 0.2 m."""
+    k_rep 0.01 m^3/s and rho_0 0.6 m: 0.19 m/s push at 0.3 m from the obstacle's surface, 0.83 m/s at 0.2 m."""
 
     k_att_per_s: float = 1.0          # attractive gain [1/s]
     d_conic_m: float = 0.8            # quadratic -> conic switch distance [m]
@@ -45,6 +46,7 @@ class ApfParams:
     rho0_m: float = 0.6               # influence distance beyond the inflated radius [m]
     rho_min_m: float = 0.02           # floor of rho in the gradient [m]
     lookahead_s: float = 0.0          # where the prediction places dynamic obstacles [s]
+    margin_m: float = 0.0             # safety margin beyond r_R + r_i (module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("d_conic_m", "rho0_m", "rho_min_m"),
@@ -94,10 +96,7 @@ class ApfPlanner:
         else:
             v = attractive_velocity(state.p, goal, self.apf)
             if len(obstacles):
-                unc = p.uncertainty
-                u_now = np.array([state.vx, state.vy, state.wz])
-                m = uncertainty_radius(state.theta, u_now[None], obstacles.v, obstacles.cov, unc)
-                D = inflated_radius(obstacles.r, m, unc.kappa_exec, unc)
+                D = Geometry(self.apf.margin_m).radius(obstacles.r, p)
                 obs_p = obstacles.p + self.apf.lookahead_s * obstacles.v
                 v = v + repulsive_velocity(state.p, obs_p, D, self.apf)
             u = clip_command(body_from_world(state.theta, v), p)

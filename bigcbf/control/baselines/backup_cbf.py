@@ -13,8 +13,12 @@ form), searched on a grid rather than in closed form. Here, at every control tic
 
 * Nominal: the GOAL feedback law (Eq. 8 with b = GOAL), as for CBF-only.
 * Backup policy pi_b: braking to a stop (world velocity command 0) tracked with the deceleration limit
-  ``a_brake_mps2`` (:mod:`.shield`); horizon N dt = 1.5 s; safety h_i^k >= 0 with the shared D_i (Eq. 14,
-  kappa_exec) against the shared prediction (Eqs. 2-3) for every obstacle and step.
+  ``a_brake_mps2`` (:mod:`.shield`); horizon N dt = 1.5 s; safety h_i^k = ||q_i^k||^2 - D_i^2 >= 0 against the
+  shared prediction (Eqs. 2-3) for every obstacle and step.
+* Geometry (the method's own, not BIG-CBF's shared uncertainty): D_i = r_R + r_i, the footprint against the
+  obstacle with no extra margin (``margin_m`` 0). Backup CBFs certify the implicit safe set of a collision-free
+  constraint set; the robustness they add comes from the backup horizon, not from an inflated radius, and Chen et
+  al. state no margin. The common hard CBF downstream enforces r_R + r_i + d0 + kappa_exec m_i for every method.
 * Shield (interpolation): candidates u_lambda = (1 - lambda) u_nom + lambda u_b for
   lambda on the grid ``blends`` (0 = nominal, 1 = backup). For each, the state after one control step T_C
   under u_lambda (Eq. 1, nominal) is computed and the backup rollout from there (initial velocity that of
@@ -33,13 +37,14 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..uncertainty import nominal_velocity
-from .common import clip_command, predict
+from .common import Geometry, clip_command, predict
 from .shield import ShieldPlanner, one_step, rollout
 
 
 @dataclass(frozen=True)
 class BackupCbfParams:
     a_brake_mps2: float = 2.0                                  # braking deceleration of the backup [m/s^2]
+    margin_m: float = 0.0                                      # the method's own safety margin (docstring) [m]
     blends: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)    # lambda grid, increasing, from 0 to 1 [-]
 
     def __post_init__(self):
@@ -71,7 +76,8 @@ class BackupCbfPlanner(ShieldPlanner):
         v0 = nominal_velocity(state.theta, U, p.uncertainty.execution)
         p1 = one_step(state.p[None], state.theta, U, p)
         pred = predict(obstacles, p, t0_s=p.T_C_s)
-        ro = rollout(p1, v0, state.theta, brake_policy, pred, p, self.backup.a_brake_mps2)
+        ro = rollout(p1, v0, state.theta, brake_policy, pred, p, self.backup.a_brake_mps2,
+                     Geometry(self.backup.margin_m))
         self.last_h_min = ro.h_min
         ok = np.flatnonzero(ro.h_min >= 0.0)
         if len(ok):

@@ -1,10 +1,12 @@
 """Helpers shared by the comparison methods: the shared prediction (Eqs. 2-3), rollouts under the nominal
-execution model (Eq. 1) and the shared barrier h_i = ||q_i||^2 - D_i^2 along a horizon (Eqs. 14-15).
+execution model (Eq. 1) and each method's own collision barrier h_i = ||q_i||^2 - D_i^2 along a horizon.
 
 Every baseline that looks ahead uses the same constant-velocity obstacle prediction with growing covariance as
-BIG-CBF (``predict_obstacles``) and the same inflated radius D_i (Eq. 14) with the uncertainty radius m_i of
-Eq. (15) evaluated at the command that moves the robot at each step, scaled by ``kappa_exec``: the baselines'
-certificates and costs then talk about the same set the common execution filter enforces.
+BIG-CBF (``predict_obstacles``; all methods receive identical observations). Their collision geometry is their
+own (:class:`Geometry`): D_i = scale (r_R + r_i) + margin_m, the robot's and the obstacle's radii and the method's
+own safety margin from its source (each module documents its choice). They do *not* plan with the shared
+uncertainty radius m_i of Eq. (15): in the paper, sharing that uncertainty with the planning layer is BIG-CBF's
+contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
 """
 from __future__ import annotations
 
@@ -16,9 +18,26 @@ from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import clip_command  # noqa: F401  (re-exported for the baselines)
 from ..prediction import predict_obstacles, q_sigma_for
-from ..uncertainty import barrier, inflated_radius, nominal_velocity, rotation, uncertainty_radius
+from ..uncertainty import barrier, nominal_velocity, rotation
 
 _TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A method's own collision geometry: obstacle i is avoided at D_i = scale (r_R + r_i) + margin_m [m] (the
+    robot's footprint r_R and the obstacle's radius r_i, optionally scaled, plus the method's safety margin)."""
+
+    margin_m: float = 0.0     # the method's own safety margin [m]
+    scale: float = 1.0        # multiplies r_R + r_i [-]
+
+    def __post_init__(self):
+        if not (self.margin_m >= 0 and self.scale >= 1.0):
+            raise ValueError("a planning geometry needs margin_m >= 0 and scale >= 1")
+
+    def radius(self, r_obs, params: StackParams) -> np.ndarray:
+        """D_i (...,) [m] for obstacle radii r_obs (...,)."""
+        return self.scale * (params.uncertainty.r_robot_m + np.asarray(r_obs, float)) + self.margin_m
 
 
 @dataclass(frozen=True)
@@ -82,34 +101,23 @@ def world_velocity(state: RobotState) -> np.ndarray:
     return rotation(state.theta) @ np.array([state.vx, state.vy])
 
 
-def barrier_along(paths: np.ndarray, theta: np.ndarray, u: np.ndarray, pred: Prediction,
-                  params: StackParams) -> np.ndarray:
-    """h_i^k = ||p_k - p_{i,k}||^2 - D_{i,k}^2 (Eq. 14) for every rollout b, state k = 0..K and obstacle i,
-    shape (B, K+1, M) [m^2]. D_{i,k} = r_R + r_i + d0 + kappa_exec m_{i,k} (Eq. 14), m_{i,k} from Eq. (15) with
-    the predicted covariance Sigma_{i,k} (Eq. 3) and the command that moves the robot from state k (the last
-    command u_{K-1} for the terminal state, as in the imagination)."""
-    unc = params.uncertainty
+def barrier_along(paths: np.ndarray, pred: Prediction, params: StackParams, geometry: Geometry) -> np.ndarray:
+    """h_i^k = ||p_k - p_{i,k}||^2 - D_i^2 for every rollout b, state k = 0..K and obstacle i, shape (B, K+1, M)
+    [m^2], with the method's own D_i = ``geometry.radius(r_i)`` against the shared prediction p_{i,k} (Eq. 2)."""
     B, K1 = paths.shape[:2]
     if pred.M == 0:
         return np.full((B, K1, 0), np.inf)
-    u = np.asarray(u, float)
-    u_ref = np.concatenate([u, u[:, -1:]], axis=1)               # (B, K+1, 3)
-    m = uncertainty_radius(np.asarray(theta)[:, :, None], u_ref[:, :, None, :], pred.v[None, None],
-                           pred.cov[None], unc)                 # (B, K+1, M)
-    D = inflated_radius(pred.r[None, None], m, unc.kappa_exec, unc)
-    return barrier(paths[:, :, None, :] - pred.p[None], D)
+    D = geometry.radius(pred.r, params)
+    return barrier(paths[:, :, None, :] - pred.p[None], D[None, None])
 
 
-def surface_distance(paths: np.ndarray, theta: np.ndarray, u: np.ndarray, pred: Prediction,
-                     params: StackParams) -> np.ndarray:
-    """||q_i|| - D_i along the rollouts (B, K+1, M) [m]: the signed distance to the inflated radius (Eq. 14),
-    recovered from h = ||q||^2 - D^2 and ||q||."""
-    h = barrier_along(paths, theta, u, pred, params)
+def surface_distance(paths: np.ndarray, pred: Prediction, params: StackParams, geometry: Geometry) -> np.ndarray:
+    """||q_i|| - D_i along the rollouts (B, K+1, M) [m]: the signed distance to the method's own collision radius."""
+    B, K1 = paths.shape[:2]
     if pred.M == 0:
-        return h
+        return np.full((B, K1, 0), np.inf)
     qn = np.hypot(*(paths[:, :, None, :] - pred.p[None]).transpose(3, 0, 1, 2))
-    D = np.sqrt(np.maximum(qn * qn - h, 0.0))
-    return qn - D
+    return qn - geometry.radius(pred.r, params)[None, None]
 
 
 def at_goal(state: RobotState, goal: np.ndarray, params: StackParams) -> bool:

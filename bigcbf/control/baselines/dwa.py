@@ -11,8 +11,10 @@ G(v) = sigma(alpha heading + beta dist + gamma vel). Here, at every control tick
   the planner barely change its command.
 * Rollout: each sample held for the 1.5 s horizon (N = 15 steps of dt = 0.1 s) under Eq. (1) (arcs when
   wz != 0), against the shared prediction (Eqs. 2-3) of every obstacle.
-* Admissibility: the rollout stays outside every inflated radius D_i (Eq. 14, kappa_exec, m_i of Eq. 15 at the
-  sample) at every step of the 1.5 s horizon. Fox's Va (the robot can stop before the first collision on its
+* Admissibility: the rollout stays outside every collision radius D_i = r_R + r_i (the method's own geometry:
+  Fox et al. admit a velocity when the robot's footprint can stop before touching the obstacle; no margin,
+  ``margin_m`` 0; the shared uncertainty m_i of Eq. (15) is BIG-CBF's, applied to every method by the common hard
+  CBF downstream) at every step of the 1.5 s horizon. Fox's Va (the robot can stop before the first collision on its
   trajectory, ||v|| <= sqrt(2 a dist)) is implied: an admissible trajectory has no collision within the horizon,
   and the braking distance at v_max, 0.8^2 / (2 * 2.0) = 0.16 m, is far shorter than the horizon's path. If no
   sample is admissible, the sample with the largest worst-case clearance wins.
@@ -37,7 +39,7 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
-from .common import at_goal, clip_command, integrate, predict, surface_distance
+from .common import Geometry, at_goal, clip_command, integrate, predict, surface_distance
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,7 @@ class DwaParams:
     w_velocity: float = 0.1           # weight of speed [-]
     w_yaw: float = 0.1                # penalty on |wz| / wz_max [-]
     clearance_cap_m: float = 1.0      # clearance beyond this does not count [m]
+    margin_m: float = 0.0             # the method's own safety margin beyond r_R + r_i (module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("acc_xy_mps2", "window_s", "clearance_cap_m"),
@@ -90,7 +93,7 @@ def dwa_scores(U: np.ndarray, state: RobotState, obstacles: Obstacles, goal, par
     speed = np.hypot(U[:, 0], U[:, 1])
     pred = predict(obstacles, params, K, dt)
     if pred.M:
-        sd = surface_distance(paths, theta, Ur, pred, params)        # (S, K+1, M)
+        sd = surface_distance(paths, pred, params, Geometry(dp.margin_m))    # (S, K+1, M)
         clear = sd[:, 1:].min(axis=(1, 2))           # k >= 1: the sample cannot change state 0
         admissible = clear >= 0.0
     else:

@@ -11,7 +11,11 @@ vectorized over samples, steps and obstacles.
   |v| <= v_max; sample 0 is the unperturbed mean, sample 1 the stop sequence. The RNG is
   np.random.default_rng(seed) created in ``reset(seed)``: an episode is deterministic per seed.
 * Rollout: Eq. (1) (nominal execution model) from the current state, obstacles by the shared prediction
-  (Eqs. 2-3); the inflated radius D_i of Eq. (14) with m_i of Eq. (15) at each sample's command, kappa_exec.
+  (Eqs. 2-3); the method's own collision radius D_i = r_R + r_i + ``margin_m`` with margin_m = 0.10 m, the default
+  ``collision_margin_distance`` of Nav2's MPPI controller ("margin distance from collision to apply severe
+  penalty, similar to footprint inflation; between 0.05-0.2 is reasonable"; Williams et al. penalize track
+  boundaries and state no obstacle margin). The shared uncertainty m_i of Eq. (15) is BIG-CBF's; the common hard
+  CBF downstream applies it to every method.
 * Cost S(V^s) = sum_k dt [w_goal ||p_k - p_g|| + w_coll 1(d_k < 0) + w_clear exp(-max(d_k, 0) / l_clear)]
   + w_term ||p_N - p_g|| + w_smooth sum_k ||V_k - V_{k-1}||^2 (V_{-1} = the measured velocity)
   + gamma sum_k V_k^T Sigma^{-1} eps_k (the control-cost term of the information-theoretic update, Williams'
@@ -37,7 +41,8 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo
-from .common import at_goal, barrier_along, body_from_world, clip_command, integrate, predict, world_velocity
+from .common import (Geometry, at_goal, barrier_along, body_from_world, clip_command, integrate, predict,
+                     world_velocity)
 
 _T_EPS = 1e-6
 _TINY = 1e-12
@@ -58,6 +63,7 @@ class MppiParams:
     w_clear: float = 2.0              # running clearance cost [1/s]
     l_clear_m: float = 0.15           # clearance cost length scale [m]
     w_smooth: float = 0.05            # smoothness weight [s^2/m^2]
+    margin_m: float = 0.10            # collision margin beyond r_R + r_i (Nav2 MPPI's default; module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("sigma_mps", "gamma", "ess_fraction", "l_clear_m"),
@@ -134,7 +140,7 @@ class MppiPlanner:
         dg = np.hypot(*(paths - goal).transpose(2, 0, 1))           # (S, N+1)
         cost = mp.w_goal * dt * dg[:, 1:].sum(axis=1) + mp.w_term * dg[:, -1]
         if pred.M:
-            h = barrier_along(paths, theta, U, pred, p)[:, 1:]       # (S, N, M)
+            h = barrier_along(paths, pred, p, Geometry(mp.margin_m))[:, 1:]   # (S, N, M)
             qn = np.hypot(*(paths[:, 1:, None, :] - pred.p[None, 1:]).transpose(3, 0, 1, 2))
             d = (qn - np.sqrt(np.maximum(qn * qn - h, 0.0))).min(axis=2)   # ||q|| - D, nearest obstacle
             cost += dt * (mp.w_coll * (d < 0).sum(axis=1) + mp.w_clear * np.exp(-np.maximum(d, 0.0)

@@ -5,8 +5,8 @@ PL-CBF generalizes the single backup policy of backup CBFs to a finite library o
 rolled out in parallel: a state is certified when at least one library policy keeps the trajectory safe over the
 horizon, and the nominal input is kept whenever it leads to a certified state. The authors' navigation examples
 use a set of directional ("angle") fallback policies plus stopping; we use, as world-velocity policies
-(:mod:`.shield`, acceleration limit ``a_max_mps2``, horizon N dt = 1.5 s, shared D_i with kappa_exec and the
-shared prediction):
+(:mod:`.shield`, acceleration limit ``a_max_mps2``, horizon N dt = 1.5 s, the shared prediction, the method's
+own geometry below):
 
 * STOP: command zero velocity;
 * DIR-j, j = 0..n_dir-1: move at ``v_dir_mps`` along the goal direction rotated by 2 pi j / n_dir for
@@ -22,6 +22,10 @@ mode = its name). Value = goal progress of the rollout, ||p_0 - p_g|| - ||p_K - 
 min h. If nothing is certified, the policy with the largest min h (the least violating) is executed.
 The authors select by a minimum-intervention QP; with a holonomic first-order base the library's first commands
 are the candidate inputs, so the selection above is the discrete counterpart (documented choice).
+Geometry (the method's own, not BIG-CBF's shared uncertainty): the authors' library (github.com/tkkim-robot/
+safe_control, whose CBFs PL-CBF builds on) uses h = ||p - p_o||^2 - beta (r_o + r_R)^2 with beta = 1.01, i.e.
+D_i = sqrt(1.01) (r_R + r_i) (``radius_scale``), a 0.5 % inflation of the footprint-plus-obstacle distance and no
+additive margin. The common hard CBF downstream enforces r_R + r_i + d0 + kappa_exec m_i for every method.
 Deterministic.
 """
 from __future__ import annotations
@@ -35,7 +39,7 @@ from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import goal_basis, release_velocity
 from ..uncertainty import nominal_velocity
-from .common import body_from_world, clip_command, predict, world_velocity
+from .common import Geometry, body_from_world, clip_command, predict, world_velocity
 from .shield import ShieldPlanner, one_step, rollout
 
 
@@ -45,6 +49,8 @@ class PlCbfParams:
     v_dir_mps: float = 0.5         # speed of a directional policy [m/s]
     t_move_s: float = 1.0          # how long a directional policy moves before stopping [s]
     a_max_mps2: float = 2.0        # acceleration limit of the rollouts [m/s^2]
+    radius_scale: float = 1.01 ** 0.5   # D_i = radius_scale (r_R + r_i): safe_control's beta = 1.01 on D^2 [-]
+    margin_m: float = 0.0          # additive safety margin [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("v_dir_mps", "t_move_s", "a_max_mps2"), min_int={"n_dir": 1})
@@ -100,14 +106,15 @@ class PlCbfPlanner(ShieldPlanner):
         # 1) is the state after one step of the nominal certified by some library policy?
         p1 = one_step(state.p, state.theta, u_nom, p)
         v1 = nominal_velocity(state.theta, u_nom, p.uncertainty.execution)
+        geo = Geometry(self.pl.margin_m, self.pl.radius_scale)
         ro = rollout(np.tile(p1, (L, 1)), np.tile(v1, (L, 1)), state.theta, lib.policy(p1),
-                     predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2)
+                     predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2, geo)
         if np.any(ro.h_min >= 0.0):
             self.last_h_min = ro.h_min
             return clip_command(u_nom, p), "NOMINAL", ro.p[int(np.argmax(ro.h_min))]
         # 2) otherwise execute the best certified library policy from the current state
         ro = rollout(np.tile(state.p, (L, 1)), np.tile(world_velocity(state), (L, 1)), state.theta,
-                     lib.policy(state.p), predict(obstacles, p), p, self.pl.a_max_mps2)
+                     lib.policy(state.p), predict(obstacles, p), p, self.pl.a_max_mps2, geo)
         self.last_h_min = ro.h_min
         ok = ro.h_min >= 0.0
         if ok.any():

@@ -10,8 +10,9 @@ velocity E(c) = R(theta)(A_xy R(theta)^T c + d_xy), which the robot reaches with
 
 The initial v0 is a realized velocity too (measured, or E of the command about to be sent).
 
-Safety of a rollout is the shared barrier h_i^k >= 0 (Eq. 14, D_i with kappa_exec and m_i of Eq. 15 at the
-rollout command) for every obstacle i and every state k = 0..K against the shared prediction (Eqs. 2-3).
+Safety of a rollout is the method's own barrier h_i^k = ||q_i^k||^2 - D_i^2 >= 0 (D_i of the shield's
+:class:`~bigcbf.control.baselines.common.Geometry`: footprint, obstacle radius, the method's margin) for every
+obstacle i and every state k = 0..K against the shared prediction (Eqs. 2-3).
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from ...types import Obstacles, RobotState
 from ..behaviors import behavior_command
 from ..planner import PlanInfo
 from ..uncertainty import nominal_velocity
-from .common import Prediction, accel_limited, at_goal, barrier_along, body_from_world
+from .common import Geometry, Prediction, accel_limited, at_goal, barrier_along, body_from_world
 
 Policy = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
 
@@ -40,7 +41,7 @@ class Rollout:
 
 
 def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: Prediction,
-            params: StackParams, a_max: float) -> Rollout:
+            params: StackParams, a_max: float, geometry: Geometry = Geometry()) -> Rollout:
     """Roll B closed-loop policies out from positions p0 (B, 2) and world velocities v0 (B, 2) over the
     prediction's horizon (see the module docstring); ``policy`` returns (B, 2) commands for all rows."""
     K, dt = pred.p.shape[0] - 1, params.dt_s
@@ -62,7 +63,7 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
         p = p + dt * v
         P[:, k + 1] = p
     U = body_from_world(theta, Vc)
-    h = barrier_along(P, np.full((B, K + 1), theta), U, pred, params)
+    h = barrier_along(P, pred, params, geometry)
     h_min = h.min(axis=(1, 2)) if pred.M else np.full(B, np.inf)
     return Rollout(P, Vc, U, h_min)
 
