@@ -8,7 +8,6 @@ import bigcbf.gym_env  # noqa: E402  (registers bigcbf/Navigation-v0)
 from bigcbf.control.methods import make_planner  # noqa: E402
 from bigcbf.episode import DETERMINISTIC_KEYS, Episode  # noqa: E402
 from bigcbf.gym_env import ENV_ID, NavigationEnv, RewardWeights  # noqa: E402
-from bigcbf.params.stack import SIMULATION  # noqa: E402
 from bigcbf.scenario import load_scenario  # noqa: E402
 
 
