@@ -26,7 +26,7 @@ import numpy as np
 
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from ..uncertainty import inflated_radius, uncertainty_radius
 from .common import at_goal, body_from_world, clip_command
 
@@ -77,6 +77,7 @@ class ApfPlanner:
     def reset(self, seed: int) -> None:
         """Stateless."""
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)

@@ -35,7 +35,7 @@ import numpy as np
 
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from .common import at_goal, clip_command, integrate, predict, surface_distance
 
 
@@ -113,6 +113,7 @@ class DwaPlanner:
     def reset(self, seed: int) -> None:
         """Stateless (a deterministic grid search)."""
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)
