@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .control.cbf import CbfFilter
+from .control.cbf import PERCEPTION_FAULT, CbfFilter
 from .control.methods import METHODS
 from .control.metrics import cbf_energy
 from .params.perception import PerceptionParams
@@ -43,18 +43,23 @@ class EpisodeResult:
     collision: bool
     timeout: bool
     time_s: float                 # completion time (the episode's end time)
-    min_clearance_m: float        # min over the episode of true surface distance - r_R
+    #: min over the episode of the signed distance between the robot's collision outline and the nearest obstacle
+    #: (sim/truth.py; < 0 is a penetration, which is a contact); +inf (JSON null) in a scene without obstacles
+    min_clearance_m: float
     e_cbf: float                  # Eq. (20)
     cbf_active_ratio: float
     qp_infeasible_ratio: float
     planner_p95_ms: float
     cbf_p95_ms: float
     perception_p95_ms: float
-    stopped_time_s: float         # time with true planar speed below v_freeze
+    stopped_time_s: float         # simulated time whose last control tick saw a true planar speed below v_freeze
     final_goal_dist_m: float      # true distance to the goal at the end
     sim_time_s: float
     wall_time_s: float
     control_steps: int
+    #: control steps at which the CBF filter found the obstacle estimates non-finite or implausible and braked
+    #: (FilterInfo.fallback "perception-fault", see control/cbf.py)
+    perception_faults: int = 0
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
@@ -93,7 +98,7 @@ class Episode:
         self.perception_mode = perception
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
-        self.truth = GroundTruth(self.world.model, self.world.scene, params.uncertainty.r_robot_m)
+        self.truth = GroundTruth(self.world.model, self.world.scene)
         peds = scenario.pedestrians
         self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
                                 [p.start_time_s for p in peds], [p.radius_m for p in peds],
@@ -141,7 +146,8 @@ class Episode:
         wall0 = time.perf_counter()
         steps_per_control = int(round(p.T_C_s / w.dt))
         steps_per_scan = int(round(1.0 / w.lidar.config.rate_hz / w.dt))
-        e_cbf, active, infeasible, n_ctrl, stopped = 0.0, 0, 0, 0, 0.0
+        e_cbf, active, infeasible, n_ctrl, stopped, faults = 0.0, 0, 0, 0, 0.0, 0
+        is_stopped = False
         planner_ms, cbf_ms, percep_ms = [], [], []
         modes: list[tuple[float, str]] = []
         min_clear = np.inf
@@ -175,12 +181,12 @@ class Episode:
                 e_cbf += cbf_energy(u_safe, u_in, p.R_u_diag)
                 active += bool(finfo.active)
                 infeasible += bool(finfo.infeasible)
+                faults += finfo.fallback == PERCEPTION_FAULT
                 n_ctrl += 1
                 if not modes or modes[-1][1] != pinfo.mode:
                     modes.append((round(w.t, 3), pinfo.mode))
                 ts = w.true_state()
-                if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
-                    stopped += p.T_C_s
+                is_stopped = bool(np.hypot(ts.vx, ts.vy) < p.v_freeze_mps)   # until the next control tick
                 if self.observers:
                     rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
                                      bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D),
@@ -195,7 +201,9 @@ class Episode:
                 w.step(nb)
                 k += nb
                 nxt -= nb
-                min_clear = min(min_clear, self.truth.clearance(w.data.qpos[0:2], self._ped_positions()))
+                if is_stopped:
+                    stopped += nb * w.dt
+                min_clear = min(min_clear, self.truth.clearance(w.pose(), self._ped_positions()))
                 collision = self.truth.in_contact(w.data)
             if collision:
                 break
@@ -209,7 +217,7 @@ class Episode:
             stopped_time_s=round(stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - wall0, control_steps=n_ctrl,
-            mode_history=modes, perception=self.perception_mode, warnings=w.warnings())
+            perception_faults=faults, mode_history=modes, perception=self.perception_mode, warnings=w.warnings())
 
 
 def _p95(xs) -> float:
@@ -219,4 +227,4 @@ def _p95(xs) -> float:
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
-                      "mode_history")
+                      "perception_faults", "mode_history")

@@ -50,12 +50,13 @@ class EpisodeVideo:
                 add_points(scn, pts[::2], z=0.19, radius=0.025)
             obs = rec.obstacles
             D = rec.D if rec.D is not None and len(rec.D) == len(obs) else None
+            finite = np.isfinite(obs.p).all(axis=1) & np.isfinite(obs.r)     # a perception fault draws nothing
             for i in range(len(obs)):
-                if obs.ids[i] >= 0:
-                    rad = float(D[i]) if D is not None else float(obs.r[i])
+                if obs.ids[i] >= 0 and finite[i]:
+                    rad = float(D[i]) if D is not None and D[i] > 0 else float(obs.r[i])
                     add_ring(scn, obs.p[i], rad, z=0.012, rgba=(1.0, 0.75, 0.0, 0.9))
                     add_ring(scn, obs.p[i], float(obs.r[i]), z=0.012, rgba=(1.0, 1.0, 1.0, 0.6), segments=20)
-            walls = obs.p[obs.ids < 0]
+            walls = obs.p[(obs.ids < 0) & finite]
             if len(walls):
                 add_points(scn, walls, z=0.05, radius=0.04, rgba=(1.0, 0.75, 0.0, 0.9))
             if rec.path is not None and len(rec.path) > 1:
@@ -72,14 +73,25 @@ class EpisodeVideo:
         self.writer.write(frame)
 
     def close(self) -> None:
-        self.writer.close()
+        """Finish the video (it appears at its path only now)."""
+        try:
+            self.writer.close()
+        finally:
+            self.renderer.close()
+
+    def abort(self) -> None:
+        """Drop the unfinished video (its path is left as it was)."""
+        self.writer.abort()
         self.renderer.close()
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 def side_by_side(inputs: list[str | Path], out: str | Path, fps: float) -> int:
