@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
+
+from .argtypes import path_arg
 
 HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite, resumable; "
         "write episodes.csv, summary.json/.md and figures")
@@ -10,7 +11,7 @@ HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite
 
 
 def add_arguments(p):
-    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+    p.add_argument("--out", type=path_arg, required=True, metavar="DIR",
                    help="output directory (created; rerunning with the same DIR resumes)")
     p.add_argument("--methods", nargs="+", default=None, metavar="M",
                    help="methods to compare (default: every registered method)")
@@ -20,7 +21,8 @@ def add_arguments(p):
                    help="scenario names or .toml files instead of the suite's")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
-                       help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper)")
+                       help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper; at most "
+                            "10000)")
     seeds.add_argument("--seed-list", nargs="+", default=None, metavar="SEED", help="these seeds instead")
     p.add_argument("--workers", default=None, metavar="K",
                    help="parallel episodes (default: one per core; with --engine ray: the cluster's CPUs)")
@@ -28,26 +30,36 @@ def add_arguments(p):
                    help="local process pool (default) or Ray tasks (pip install 'bigcbf[ray]')")
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray instance")
-    p.add_argument("--profile", type=Path, default=None,
+    p.add_argument("--profile", type=path_arg, default=None,
                    help="stack parameters / uncertainty profile TOML (default: Table I); part of the episode key")
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",
                    help="run nothing: rebuild the outputs from the episodes already in DIR/results.sqlite")
-    p.add_argument("--docs", type=Path, default=None, metavar="PAGE",
+    p.add_argument("--docs", type=path_arg, default=None, metavar="PAGE",
                    help="also put the results into this Markdown page between its bench-results markers")
     p.add_argument("--progress", choices=["auto", "on", "off"], default="auto",
                    help="progress bar (default: only on a terminal)")
 
 
-def _int(value: str, option: str, minimum: int) -> int:
+#: the most seeds one bench runs (200 x the paper's 50; 720,000 episodes with the paper's 8 methods and 9 scenes)
+MAX_SEEDS = 10_000
+#: the most local worker processes per core (each holds a MuJoCo model and the stack, ~200 MB)
+MAX_WORKERS_PER_CORE = 4
+#: the most Ray tasks in flight / cluster CPUs one bench asks for
+MAX_RAY_WORKERS = 10_000
+
+
+def _int(value: str, option: str, minimum: int, maximum: int | None = None) -> int:
     from ..errors import UserError
     try:
         v = int(value)
     except (TypeError, ValueError):
-        raise UserError(f"{option} expects a whole number, got {value!r}") from None
+        raise UserError(f"{option} expects a whole number, got {str(value)[:40]!r}") from None
     if v < minimum:
         raise UserError(f"{option} must be >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise UserError(f"{option} must be <= {maximum}, got {str(value)[:40]}")
     return v
 
 
@@ -59,6 +71,7 @@ def config_from_args(args):
     from ..bench.suites import SUITES
     from ..control.methods import METHODS
     from ..errors import UserError
+    from .argtypes import MAX_SEED
     from .run import load_params
 
     if args.engine not in ENGINES:
@@ -71,10 +84,14 @@ def config_from_args(args):
         raise UserError(f"--perception must be lidar or truth, got {args.perception!r}")
     suite = SUITES.get(args.suite)
     if args.seed_list is not None:
-        seeds = tuple(_int(s, "--seed-list", 0) for s in args.seed_list)
+        if len(args.seed_list) > MAX_SEEDS:
+            raise UserError(f"--seed-list: at most {MAX_SEEDS} seeds in one bench, got {len(args.seed_list)}")
+        seeds = tuple(_int(s, "--seed-list", 0, MAX_SEED) for s in args.seed_list)
     else:
-        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(suite.default_seeds), "--seeds", 1)))
-    workers = None if args.workers is None else _int(args.workers, "--workers", 1)
+        seeds = tuple(range(_int(args.seeds if args.seeds is not None else str(suite.default_seeds), "--seeds", 1,
+                                 MAX_SEEDS)))
+    max_workers = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1) if args.engine == "local" else MAX_RAY_WORKERS
+    workers = None if args.workers is None else _int(args.workers, "--workers", 1, max_workers)
     if workers is None and args.engine == "local":
         workers = os.cpu_count() or 1
     methods = tuple(args.methods) if args.methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
@@ -92,10 +109,12 @@ def config_from_args(args):
 
 
 def run(args) -> int:
-    from ..bench.report import update_docs_page
+    from ..bench.report import check_docs_page, update_docs_page
     from ..bench.runner import run_bench
 
     config = config_from_args(args)
+    if args.docs is not None:            # before the bench: a page that cannot take the results fails now
+        check_docs_page(args.docs)
     progress = {"auto": None, "on": True, "off": False}[args.progress]
     outcome = run_bench(config, progress=progress, report_only=args.report_only)
     if args.docs is not None:
