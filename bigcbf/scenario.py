@@ -54,7 +54,7 @@ XY = tuple[float, float]
 def _in_world(name: str, *points) -> None:
     for xy in points:
         if max(abs(xy[0]), abs(xy[1])) > WORLD_LIMIT_M:
-            raise FieldError(name.split()[0], f"must lie within +-{WORLD_LIMIT_M:g} m, got {tuple(xy)}")
+            raise FieldError(name, f"must lie within +-{WORLD_LIMIT_M:g} m, got {tuple(xy)}")
 
 
 def _sizes(name: str, *values: float) -> None:
