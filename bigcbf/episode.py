@@ -203,7 +203,7 @@ class Episode:
                 nxt -= nb
                 if is_stopped:
                     stopped += nb * w.dt
-                min_clear = min(min_clear, self.truth.clearance(w.pose(), self._ped_positions()))
+                min_clear = min(min_clear, self.truth.clearance(w.pose(), self._ped_positions(), min_clear))
                 collision = self.truth.in_contact(w.data)
             if collision:
                 break

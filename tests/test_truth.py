@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from bigcbf.sim.scene import Box, Cylinder, PedestrianBody, SceneSpec, Wall
 from bigcbf.sim.truth import (Clearance, GroundTruth, Outline, outline_from_model, rect_rect_distance,
-                              robot_outline)
+                              rect_rect_distance_one, robot_outline)
 from bigcbf.sim.world import SimWorld
 
 #: the measured relation (below): contact <=> clearance <= 0 within this [m] (MuJoCo's soft contacts and the
@@ -44,6 +44,8 @@ def test_rect_rect_by_hand():
     assert _one((0, 0), (0.15, 0.1), 0, (0.5, 0), (0.2, 0.2), math.pi / 4) == pytest.approx(d)
     # the same square pushed in by 0.02: penetration 0.02 (along x, the robot's face normal)
     assert _one((0, 0), (0.15, 0.1), 0, (0.5 - d - 0.02, 0), (0.2, 0.2), math.pi / 4) == pytest.approx(-0.02)
+    # the robot wholly inside a 1 x 1 m box, 0.2 m below its centre: moving it 0.4 m down separates them
+    assert _one((0.1, -0.2), (0.15, 0.1), 0, (0, 0), (0.5, 0.5), 0) == pytest.approx(-0.4)
 
 
 def _seg_dist(p, q, a, b):
@@ -84,9 +86,25 @@ def test_rect_rect_against_segment_distances(bx, by, byaw, hx, hy, ayaw, _):
                or edges < 1e-12)
     if overlap:
         assert d <= 1e-12
-        assert -d <= min(a_h) + min(b_h) + 1e-9 or edges < 1e-12
+        # the penetration is the shortest separating translation: over 1,440 directions none is shorter than -d
+        # (the separating-axis theorem puts the minimum on an edge normal, which the implementation uses)
+        th = np.r_[np.linspace(0, np.pi, 1440, endpoint=False), ayaw, ayaw + np.pi / 2, byaw, byaw + np.pi / 2]
+        u = np.stack([np.cos(th), np.sin(th)], 1)
+        reach = lambda C: (C @ u.T).max(0) - (C @ u.T).min(0)           # noqa: E731
+        need = 0.5 * (reach(A) + reach(B)) - np.abs(u @ (np.array(b_c) - np.array(a_c)))
+        assert need.min() == pytest.approx(-d, abs=1e-9)
     else:
         assert d == pytest.approx(edges, abs=1e-9)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(st.floats(-1, 1), st.floats(-1, 1), st.floats(-4, 4), st.floats(0.02, 0.6), st.floats(0.02, 0.6),
+       st.floats(-4, 4))
+def test_the_scalar_pair_distance_equals_the_vectorized_one(bx, by, byaw, hx, hy, ayaw):
+    d = _one((0.1, -0.2), (0.15, 0.1), ayaw, (bx, by), (hx, hy), byaw)
+    one = rect_rect_distance_one(0.1, -0.2, math.cos(ayaw), math.sin(ayaw), 0.15, 0.1, bx, by, math.cos(byaw),
+                                 math.sin(byaw), hx, hy)
+    assert one == pytest.approx(d, abs=1e-12)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -99,6 +117,9 @@ def test_pruned_minimum_equals_the_full_one(x, y, yaw):
     ped = np.array([[-0.5, 0.6]])
     full = min(c.static_distances(x, y, yaw).min(), c.pedestrian_distances(x, y, yaw, ped).min())
     assert c((x, y, yaw), ped) == pytest.approx(full, abs=1e-12)
+    for running_min in (-0.5, 0.0, 0.2, 1.0):                      # as the episode calls it
+        got = c((x, y, yaw), ped, running_min)
+        assert got == pytest.approx(full, abs=1e-12) if full < running_min else got >= running_min - 1e-12
 
 
 def test_outline_from_a_model_needs_a_box_that_holds_the_rest():

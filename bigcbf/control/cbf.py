@@ -27,7 +27,9 @@ Infeasibility (or a solver failure): the same QP with one slack t >= 0 shared by
 
 finds the least worst-case violation t* = min_u max_i (l_i - C_i u)^+ over the box and, among the commands
 attaining it, the minimum-intervention one (the penalty exceeds any multiplier of the normalized rows, so t is
-minimized first). This problem is always feasible and well conditioned; a least-violation LP followed by a QP
+minimized first; a row with a component below ~1e-5 is the exception: the penalty then stops short of that
+component's last ~1e-6 m/s of violation, measured 1.5e-6 m/s, rather than swing u by the whole box for it). This
+problem is always feasible and well conditioned; a least-violation LP followed by a QP
 on the rows relaxed by t* is not: its feasible set shrinks to a point or a segment and the QP solver failed on
 such problems, leaving the LP's vertex, with an arbitrary yaw rate, as the command. If t* > ``FEAS_TOL`` the QP
 was infeasible (fallback "least-violation"); otherwise the solver had failed on a feasible problem and the slack

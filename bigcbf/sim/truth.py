@@ -109,7 +109,7 @@ def rect_rect_distance(a_c, a_h, a_yaw: float, b_c: np.ndarray, b_h: np.ndarray,
     """Signed distance (N,) [m] between one rectangle A (centre a_c, half sizes a_h, yaw a_yaw) and N rectangles B
     (centres (N, 2), half sizes (N, 2), yaws as cos, sin (N,)): the gap when apart (the nearest points of two
     disjoint convex polygons include a corner of one of them), minus the penetration depth when they overlap (the
-    smallest overlap of their projections on the four edge normals: the separating-axis theorem)."""
+    shortest translation along one of the four edge normals that separates them: the separating-axis theorem)."""
     a_c, a_h = np.asarray(a_c, float), np.asarray(a_h, float)
     ca, sa = math.cos(a_yaw), math.sin(a_yaw)
     n = len(b_c)
@@ -127,9 +127,43 @@ def rect_rect_distance(a_c, a_h, a_yaw: float, b_c: np.ndarray, b_h: np.ndarray,
                      np.stack([b_cos, b_sin], 1), np.stack([-b_sin, b_cos], 1)], axis=1)          # (N, 4, 2)
     pa = np.einsum("nkj,ij->nki", axes, a_corners)                                             # (N, 4, 4)
     pb = np.einsum("nkj,nij->nki", axes, b_corners)
-    overlap = np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))          # (N, 4)
+    # on each axis, how far one must move along it to separate the two (the half-lengths' sum minus the centres'
+    # distance; when one interval holds the other this exceeds their intersection, as a translation must)
+    reach = 0.5 * (pa.max(-1) - pa.min(-1) + pb.max(-1) - pb.min(-1))
+    overlap = reach - np.abs(0.5 * (pa.max(-1) + pa.min(-1) - pb.max(-1) - pb.min(-1)))       # (N, 4)
     depth = overlap.min(axis=1)
     return np.where(depth > 0, -depth, np.maximum(gap, 0.0))
+
+
+def rect_rect_distance_one(ax: float, ay: float, ac: float, as_: float, ahx: float, ahy: float, bx: float,
+                           by: float, bc: float, bs: float, bhx: float, bhy: float) -> float:
+    """``rect_rect_distance`` for one pair, in plain floats (the episode measures a few rectangles every 10 ms,
+    where numpy's per-call overhead dominated): rectangle A with centre (ax, ay), yaw given by (ac, as_) = (cos,
+    sin) and half sizes (ahx, ahy), rectangle B likewise. Centred rectangles project onto a unit axis u as
+    intervals of half-length hx |u.e1| + hy |u.e2| about their centres, so their overlap on u is
+    r_A + r_B - |u.(c_B - c_A)|."""
+    dx, dy = bx - ax, by - ay
+    depth = math.inf
+    for ux, uy in ((ac, as_), (-as_, ac), (bc, bs), (-bs, bc)):
+        ra = ahx * abs(ux * ac + uy * as_) + ahy * abs(uy * ac - ux * as_)
+        rb = bhx * abs(ux * bc + uy * bs) + bhy * abs(uy * bc - ux * bs)
+        overlap = ra + rb - abs(ux * dx + uy * dy)
+        if overlap <= 0.0:
+            break
+        depth = min(depth, overlap)
+    else:
+        return -depth
+    gap = math.inf
+    for (cx, cy, c, sn, hx, hy), (ox, oy, oc, osn, ohx, ohy) in (
+            ((ax, ay, ac, as_, ahx, ahy), (bx, by, bc, bs, bhx, bhy)),
+            ((bx, by, bc, bs, bhx, bhy), (ax, ay, ac, as_, ahx, ahy))):
+        for sx, sy in ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)):    # corners of one, in the other's frame
+            px = cx + c * sx * hx - sn * sy * hy - ox
+            py = cy + sn * sx * hx + c * sy * hy - oy
+            qx = abs(oc * px + osn * py) - ohx
+            qy = abs(oc * py - osn * px) - ohy
+            gap = min(gap, math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0))
+    return max(gap, 0.0)
 
 
 class Clearance:
@@ -189,24 +223,47 @@ class Clearance:
         centre, half = self._outline_pose(x, y, yaw)
         return self._circles(centre, half, yaw, np.asarray(ped_p, float).reshape(-1, 2), self.ped_r)
 
-    def __call__(self, pose, ped_p: np.ndarray) -> float:
+    def __call__(self, pose, ped_p: np.ndarray, below: float = math.inf) -> float:
         """min over obstacles of the signed distance from the outline at pose (x, y, yaw) [m] (+inf without
-        obstacles). Walls and boxes are measured exactly only where the centre-based bounds allow the minimum: the
-        outline lies between the discs of radius ``inner_radius`` and ``outer_radius`` about the robot's centre."""
+        obstacles). The outline lies between the discs of radius ``inner_radius`` and ``outer_radius`` about the
+        robot's centre, so an obstacle at centre-to-surface distance d is between d - outer and d - inner away:
+        obstacles are measured exactly nearest first, and only while their lower bound can still beat the best.
+        ``below``: a caller that needs the value only when it is below this (a running minimum) gets, otherwise,
+        some value >= below; the exact minimum whenever it is below."""
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         o = self.outline
-        centre, half = self._outline_pose(x, y, yaw)
-        best = math.inf
-        if len(self.rect_c):
-            dc = self.rect_distances(np.array([x, y]))
-            near = dc <= dc.min() + (o.outer_radius - o.inner_radius)
-            best = float(rect_rect_distance(centre, half, yaw, self.rect_c[near], self.rect_h[near],
-                                            self.rect_cos[near], self.rect_sin[near]).min())
-        if len(self.circ_c):
-            best = min(best, float(self._circles(centre, half, yaw, self.circ_c, self.circ_r).min()))
+        outer, inner = o.outer_radius, o.inner_radius
         ped_p = np.asarray(ped_p, float).reshape(-1, 2)
-        if len(ped_p):
-            best = min(best, float(self._circles(centre, half, yaw, ped_p, self.ped_r).min()))
+        groups = []                                  # (centres or None for walls and boxes, distances, radii)
+        if len(self.rect_c):
+            groups.append((None, self.rect_distances(np.array([x, y])), None))
+        for c, r in ((self.circ_c, self.circ_r), (ped_p, self.ped_r)):
+            if len(c):
+                groups.append((c, np.hypot(c[:, 0] - x, c[:, 1] - y) - r, r))
+        if not groups:
+            return math.inf
+        lowest = min(float(d.min()) for _, d, _ in groups)
+        if lowest - outer >= below:                  # everything surely at least `below` away
+            return lowest - outer
+        limit = min(below, lowest - inner) + outer   # no obstacle farther than this (centre distance) matters
+        candidates = sorted((float(d[i]), g, i) for g, (_, d, _) in enumerate(groups)
+                            for i in np.flatnonzero(d <= limit).tolist())
+        cs, sn = math.cos(yaw), math.sin(yaw)
+        cx, cy = x + cs * o.cx - sn * o.cy, y + sn * o.cx + cs * o.cy
+        best = math.inf
+        for d, g, i in candidates:
+            if d - outer >= best:
+                break
+            c, _, r = groups[g]
+            if c is None:
+                rc, rh = self.rect_c[i], self.rect_h[i]
+                v = rect_rect_distance_one(cx, cy, cs, sn, o.half_x, o.half_y, rc[0], rc[1], self.rect_cos[i],
+                                           self.rect_sin[i], rh[0], rh[1])
+            else:
+                px, py = float(c[i, 0]) - cx, float(c[i, 1]) - cy
+                qx, qy = abs(cs * px + sn * py) - o.half_x, abs(cs * py - sn * px) - o.half_y
+                v = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0) - float(r[i])
+            best = min(best, v)
         return best
 
 
@@ -236,10 +293,10 @@ class GroundTruth:
         return ground_truth_obstacles(np.asarray(p, float), centers, vels, radii, segments=self.segments,
                                       static=static)
 
-    def clearance(self, pose, ped_p: np.ndarray) -> float:
+    def clearance(self, pose, ped_p: np.ndarray, below: float = math.inf) -> float:
         """The signed distance [m] between the robot's outline at its true pose (x, y, yaw) and the nearest
-        obstacle (``Clearance``); < 0 is a penetration, i.e. a contact."""
-        return self.distance(pose, ped_p)
+        obstacle (``Clearance``; ``below`` as there); < 0 is a penetration, i.e. a contact."""
+        return self.distance(pose, ped_p, below)
 
     def in_contact(self, data: mujoco.MjData) -> bool:
         """Physical contact between the robot and any obstacle, wall or pedestrian (MuJoCo's contacts)."""
