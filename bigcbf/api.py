@@ -83,28 +83,33 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
     sc = load_scenario(scenario, seed)
     resolve_method(method)
     cfg = load_config(config, profile)
+    from .outputs import check_output_file
     for path, what in ((video, "video"), (log, "log")):
-        if path is not None and Path(path).is_dir():
-            raise UserError(f"{what} path is a directory", file=str(path))
+        if path is not None:             # before the episode: a path that cannot be written fails now
+            check_output_file(path, what)
     ep = Episode.from_config(sc, method, seed, cfg, perception=perception, time_limit_s=time_limit_s)
     ep.observers.extend(observers)
-    closers = []
+    outputs = []
     try:
         if video is not None:
             from .video import EpisodeVideo
-            closers.append(EpisodeVideo(ep, video, camera=camera))
+            outputs.append(EpisodeVideo(ep, video, camera=camera))
         if log is not None:
             from .logio.episode_log import EpisodeLogger
-            closers.append(EpisodeLogger(ep, log))
+            outputs.append(EpisodeLogger(ep, log))
         if live is not None:
             from .logio.episode_log import EpisodeLogger
             from .logio.live import RealTimePacer
             EpisodeLogger(ep, writer=live)             # the caller owns (and closes) the live writer
             ep.observers.append(RealTimePacer())
-        return ep.run()
-    finally:
-        for c in closers:
-            c.close()
+        res = ep.run()
+    except BaseException:
+        for o in outputs:                # an unfinished video or log is dropped; the paths stay as they were
+            o.abort()
+        raise
+    for o in outputs:                    # written to temporary files, renamed into place here
+        o.close()
+    return res
 
 
 def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scenarios: Sequence[str] | None = None,

@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .control.cbf import CbfFilter
+from .control.cbf import PERCEPTION_FAULT, CbfFilter
 from .control.methods import make_planner
 from .control.liveness import LivenessRecorder
 from .control.metrics import cbf_energy, margin_stats
@@ -47,18 +47,23 @@ class EpisodeResult:
     collision: bool
     timeout: bool
     time_s: float                 # completion time (the episode's end time)
-    min_clearance_m: float        # min over the episode of true surface distance - r_R
+    #: min over the episode of the signed distance between the robot's collision outline and the nearest obstacle
+    #: (sim/truth.py; < 0 is a penetration, which is a contact); +inf (JSON null) in a scene without obstacles
+    min_clearance_m: float
     e_cbf: float                  # Eq. (20)
     cbf_active_ratio: float
     qp_infeasible_ratio: float
     planner_p95_ms: float
     cbf_p95_ms: float
     perception_p95_ms: float
-    stopped_time_s: float         # time with true planar speed below v_freeze
+    stopped_time_s: float         # simulated time whose last control tick saw a true planar speed below v_freeze
     final_goal_dist_m: float      # true distance to the goal at the end
     sim_time_s: float
     wall_time_s: float
     control_steps: int
+    #: control steps at which the CBF filter found the obstacle estimates non-finite or implausible and braked
+    #: (FilterInfo.fallback "perception-fault", see control/cbf.py)
+    perception_faults: int = 0
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
@@ -125,7 +130,7 @@ class Episode:
         self.perception_mode = perception
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
-        self.truth = GroundTruth(self.world.model, self.world.scene, params.uncertainty.r_robot_m)
+        self.truth = GroundTruth(self.world.model, self.world.scene)
         peds = scenario.pedestrians
         self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
                                 [p.start_time_s for p in peds], [p.radius_m for p in peds],
@@ -190,6 +195,7 @@ class Episode:
         self._k = 0
         self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
         self._e_cbf_inf = 0.0
+        self._faults, self._is_stopped = 0, False
         self._margins_img: list[np.ndarray] = []
         self._margins_exec: list[np.ndarray] = []
         self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
@@ -261,6 +267,7 @@ class Episode:
         self._e_cbf += e_step
         self._active += bool(finfo.active)
         self._infeasible += bool(finfo.infeasible)
+        self._faults += finfo.fallback == PERCEPTION_FAULT
         if finfo.infeasible:
             self._e_cbf_inf += e_step
         self._margins_exec.append(finfo.margins)
@@ -271,8 +278,7 @@ class Episode:
             self._modes.append((round(w.t, 3), pinfo.mode))
         ts = w.true_state()
         self._live.add(w.t, state, u_safe, self.goal, (ts.px, ts.py))
-        if np.hypot(ts.vx, ts.vy) < p.v_freeze_mps:
-            self._stopped += p.T_C_s
+        self._is_stopped = bool(np.hypot(ts.vx, ts.vy) < p.v_freeze_mps)   # until the next control tick
         rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
                          bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D), pinfo.path, self._scan)
         for observer in self.observers:
@@ -291,7 +297,10 @@ class Episode:
             w.step(nb)
             self._k += nb
             nxt -= nb
-            self._min_clear = min(self._min_clear, self.truth.clearance(w.data.qpos[0:2], self._ped_positions()))
+            if self._is_stopped:
+                self._stopped += nb * w.dt
+            self._min_clear = min(self._min_clear,
+                                  self.truth.clearance(w.pose(), self._ped_positions(), self._min_clear))
             self._collision = self.truth.in_contact(w.data)
         if self._collision:
             self.done = True
@@ -312,7 +321,8 @@ class Episode:
             perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
-            mode_history=list(self._modes), perception=self.perception_mode, warnings=w.warnings(),
+            perception_faults=self._faults, mode_history=list(self._modes), perception=self.perception_mode,
+            warnings=w.warnings(),
             **self._live.metrics(self._modes, w.t),
             e_cbf_infeasible=self._e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
             m_exec_p90_m=m_exec[1])
@@ -332,6 +342,6 @@ def _p95(xs) -> float:
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
-                      "mode_history", "mode_switches_per_min", "side_reversals", "lateral_reversals",
-                      "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m", "m_exec_mean_m",
-                      "m_exec_p90_m")
+                      "perception_faults", "mode_history", "mode_switches_per_min", "side_reversals",
+                      "lateral_reversals", "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
+                      "m_exec_mean_m", "m_exec_p90_m")

@@ -18,3 +18,12 @@ class UserError(Exception):
         if field:
             where.append(f"field '{field}'")
         super().__init__(f"{': '.join(where)}: {message}" if where else message)
+
+
+class FieldError(ValueError):
+    """A dataclass's own validation (``__post_init__``) naming the field at fault; ``params.toml_io.from_dict``
+    turns it into a UserError naming the file and the field (joined to the table's path)."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        super().__init__(message)

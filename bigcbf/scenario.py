@@ -14,9 +14,22 @@ random range that each seed draws from:
 Draws are made in the file's order from a generator seeded by (seed, scenario name) only, so every method sees the
 same world for the same seed ("paired" episodes). Unknown keys and bad values raise UserError naming the file and
 the field (e.g. ``pedestrians[1].speed_mps``).
+
+Limits (documented caps, so that no file can hang or crash the simulator): ``time_limit_s`` <= 600 s; every
+coordinate within +-1000 m (``WORLD_LIMIT_M``) and ``extent_m`` in (0, 1000]; sizes > 0 and at most 1000 m;
+obstacle heights in [0.1, 100] m (``MIN_OBSTACLE_HEIGHT_M``: a lower one would pass under the robot's bumper);
+at most 200 pedestrians, 1000 walls, boxes and cylinders together, 100 floor patches and 1000 waypoints per
+pedestrian. A ``uniform`` range takes finite bounds whose difference is finite.
+
+Geometry is checked when a seed's world is drawn (``check_geometry``): the robot's collision outline (0.30 x 0.20
+m, see ``sim/truth.py``) at the start pose must be clear of every wall, box, cylinder and pedestrian (pedestrians
+where they stand at t = 0), and the robot must fit somewhere in the goal region (within 0.15 m of the goal, the
+Table I goal tolerance) clear of walls, boxes and cylinders, at some heading; pedestrians' paths may cross the
+goal. Errors name the field and the obstacle (e.g. ``robot.start`` overlaps ``walls[2]``).
 """
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -24,18 +37,51 @@ from pathlib import Path
 import numpy as np
 
 from . import PROFILES, SCENARIOS
-from .errors import UserError
+from .errors import FieldError, UserError
 from .params.robot import RobotProfile, merge_tables
-from .params.toml_io import from_dict, load_toml
+from .params.toml_io import from_dict, load_toml, parse_toml
 from .sim.scene import Box, Cylinder, FloorPatch, PedestrianBody, SceneSpec, Wall
+from .sim.truth import MIN_OBSTACLE_HEIGHT_M
+
+MAX_TIME_LIMIT_S = 600.0          # longest episode a scenario may ask for [s]
+WORLD_LIMIT_M = 1000.0            # every coordinate and size within +-this [m]
+MAX_HEIGHT_M = 100.0              # tallest obstacle [m]
+MAX_PEDESTRIANS = 200
+MAX_STATIC_OBSTACLES = 1000      # walls, boxes and cylinders together
+MAX_FLOOR_PATCHES = 100
+MAX_WAYPOINTS = 1000             # per pedestrian
+GOAL_REGION_M = 0.15             # radius of the goal region the geometry check uses (Table I's eps_g)
 
 XY = tuple[float, float]
+
+
+def _in_world(name: str, *points) -> None:
+    for xy in points:
+        if max(abs(xy[0]), abs(xy[1])) > WORLD_LIMIT_M:
+            raise FieldError(name, f"must lie within +-{WORLD_LIMIT_M:g} m, got {tuple(xy)}")
+
+
+def _sizes(name: str, *values: float) -> None:
+    if not all(0 < v <= WORLD_LIMIT_M for v in values):
+        raise FieldError(name, f"must be > 0 and <= {WORLD_LIMIT_M:g} m, got {', '.join(f'{v:g}' for v in values)}")
+
+
+def _height(h: float) -> None:
+    if not MIN_OBSTACLE_HEIGHT_M <= h <= MAX_HEIGHT_M:
+        raise FieldError("height_m", f"must be in [{MIN_OBSTACLE_HEIGHT_M:g}, {MAX_HEIGHT_M:g}] m, got {h:g} (a "
+                                     "lower obstacle would pass under the robot's bumper)")
 
 
 @dataclass(frozen=True)
 class RobotSpec:
     start: tuple[float, float, float]        # x [m], y [m], yaw [rad] in odom
     goal: XY                                 # x, y [m]
+
+    def __post_init__(self):
+        _in_world("start", self.start[:2])
+        _in_world("goal", self.goal)
+        if abs(self.start[2]) > 100.0:
+            raise FieldError("start", "the start yaw must be within +-100 rad")
 
 
 @dataclass(frozen=True)
@@ -47,9 +93,11 @@ class WallSpec:
 
     def __post_init__(self):
         if self.start == self.end:
-            raise ValueError("a wall needs distinct start and end points")
-        if self.thickness_m <= 0 or self.height_m <= 0:
-            raise ValueError("thickness_m and height_m must be > 0")
+            raise FieldError("end", "a wall needs distinct start and end points")
+        _in_world("start", self.start)
+        _in_world("end", self.end)
+        _sizes("thickness_m", self.thickness_m)
+        _height(self.height_m)
 
 
 @dataclass(frozen=True)
@@ -60,8 +108,9 @@ class BoxSpec:
     height_m: float = 0.60
 
     def __post_init__(self):
-        if min(self.half_size) <= 0 or self.height_m <= 0:
-            raise ValueError("half_size and height_m must be > 0")
+        _in_world("center", self.center)
+        _sizes("half_size", *self.half_size)
+        _height(self.height_m)
 
 
 @dataclass(frozen=True)
@@ -71,8 +120,9 @@ class CylinderSpec:
     height_m: float = 0.60
 
     def __post_init__(self):
-        if self.radius_m <= 0 or self.height_m <= 0:
-            raise ValueError("radius_m and height_m must be > 0")
+        _in_world("center", self.center)
+        _sizes("radius_m", self.radius_m)
+        _height(self.height_m)
 
 
 @dataclass(frozen=True)
@@ -86,14 +136,15 @@ class PedestrianSpec:
     reactive: bool = True                    # avoids the robot (social force); False: ignores it
 
     def __post_init__(self):
-        if len(self.waypoints) < 2:
-            raise ValueError("a pedestrian needs at least 2 waypoints")
+        if not 2 <= len(self.waypoints) <= MAX_WAYPOINTS:
+            raise FieldError("waypoints", f"a pedestrian needs at least 2 waypoints (at most {MAX_WAYPOINTS})")
+        _in_world("waypoints", *self.waypoints)
         if not (0 < self.speed_mps <= 3.0):
-            raise ValueError("speed_mps must be in (0, 3]")
+            raise FieldError("speed_mps", "must be in (0, 3] m/s")
         if not (0.1 <= self.radius_m <= 0.6):
-            raise ValueError("radius_m must be in [0.1, 0.6]")
+            raise FieldError("radius_m", "must be in [0.1, 0.6] m")
         if self.start_time_s < 0:
-            raise ValueError("start_time_s must be >= 0")
+            raise FieldError("start_time_s", "must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -103,8 +154,10 @@ class FloorPatchSpec:
     friction: float
 
     def __post_init__(self):
-        if min(self.half_size) <= 0 or not (0 < self.friction <= 5):
-            raise ValueError("half_size must be > 0 and friction in (0, 5]")
+        if not (0 < self.friction <= 5):
+            raise FieldError("friction", "must be in (0, 5]")
+        _in_world("center", self.center)
+        _sizes("half_size", *self.half_size)
 
 
 @dataclass(frozen=True)
@@ -127,11 +180,19 @@ class Scenario:
     robot_profile_base: str = field(default="", compare=False)   # the base profile's file (set by the loader)
 
     def __post_init__(self):
-        if self.time_limit_s <= 0:
-            raise ValueError("time_limit_s must be > 0")
+        if not 0 < self.time_limit_s <= MAX_TIME_LIMIT_S:
+            raise FieldError("time_limit_s", f"must be in (0, {MAX_TIME_LIMIT_S:g}] s, got {self.time_limit_s:g}")
+        if not 0 < self.extent_m <= WORLD_LIMIT_M:
+            raise FieldError("extent_m", f"must be in (0, {WORLD_LIMIT_M:g}] m, got {self.extent_m:g}")
+        for what, items, cap in (("pedestrians", self.pedestrians, MAX_PEDESTRIANS),
+                                 ("walls", self.walls + self.boxes + self.cylinders, MAX_STATIC_OBSTACLES),
+                                 ("floor_patches", self.floor_patches, MAX_FLOOR_PATCHES)):
+            if len(items) > cap:
+                raise FieldError(what, f"at most {cap} {'walls, boxes and cylinders' if what == 'walls' else what}"
+                                       f" in a scenario, got {len(items)}")
         names = [p.name for p in self.pedestrians]
         if len(set(names)) != len(names):
-            raise ValueError("pedestrian names must be unique")
+            raise FieldError("pedestrians", "pedestrian names must be unique")
 
     @property
     def goal(self) -> np.ndarray:
@@ -161,8 +222,10 @@ def _resolve(node, rng: np.random.Generator, file: str, path: str):
                 lo_hi = node["uniform"]
                 if (not isinstance(lo_hi, list) or len(lo_hi) != 2
                         or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in lo_hi)
-                        or lo_hi[0] > lo_hi[1]):
-                    raise UserError("'uniform' takes [lo, hi] with lo <= hi", file=file, field=path)
+                        or not all(math.isfinite(x) for x in lo_hi)
+                        or not math.isfinite(float(lo_hi[1]) - float(lo_hi[0])) or not lo_hi[0] <= lo_hi[1]):
+                    raise UserError("'uniform' takes [lo, hi] with finite lo <= hi (and hi - lo finite), got "
+                                    f"{lo_hi!r}", file=file, field=path)
                 return float(rng.uniform(lo_hi[0], lo_hi[1]))
             options = node["choice"]
             if not isinstance(options, list) or not options:
@@ -206,14 +269,7 @@ def robot_profile_path(ref: str, scenario_file: str | Path | None = None) -> Pat
 def robot_profile_table(path: str | Path, text: str | None = None) -> dict:
     """A robot-profile file's table, validated as a RobotProfile (errors name that file and the field); ``text``
     instead of reading the file (the bench ships profiles as text)."""
-    import tomllib
-    if text is None:
-        data = load_toml(path)
-    else:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise UserError(f"not valid TOML: {exc}", file=str(path)) from None
+    data = load_toml(path) if text is None else parse_toml(text, str(path))
     from_dict(RobotProfile, data, file=str(path))
     return data
 
@@ -264,12 +320,7 @@ def load_scenario(name_or_file: str | Path, seed: int = 0, *, robot_profile_text
 def parse_scenario(text: str, file: str | Path = "<text>", seed: int = 0) -> Scenario:
     """The Scenario a scenario file's TOML ``text`` describes, drawn for ``seed``, as :func:`load_scenario` reads
     it (``file`` names it in errors and locates a relative ``robot_profile_base``)."""
-    import tomllib
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"not valid TOML: {exc}", file=str(file)) from None
-    return scenario_from_dict(raw, Path(file), seed)
+    return scenario_from_dict(parse_toml(text, str(file)), Path(file), seed)
 
 
 def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_text: str | None = None) -> Scenario:
@@ -295,6 +346,7 @@ def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_te
     sc = from_dict(Scenario, data, file=str(path))
     if not sc.description.strip():
         raise UserError("describe the scenario's design", file=str(path), field="description")
+    check_geometry(sc, str(path))
     return replace(sc, file=str(path), seed=int(seed), dynamic=bool(sc.pedestrians),
                    robot_profile_base=str(base_path))
 
@@ -312,6 +364,41 @@ def base_profile_text(name_or_file: str | Path) -> tuple[Path, str]:
         return p, p.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read the robot profile ({exc})", file=str(p)) from None
+
+
+def check_geometry(sc: Scenario, file: str | None = None) -> None:
+    """The start pose free for the robot's collision outline and a goal region it fits in (module docstring);
+    a UserError naming the field (robot.start, robot.goal) and the obstacle otherwise."""
+    from .sim.truth import Clearance
+
+    scene = sc.scene()
+    clear = Clearance(scene)
+    x, y, yaw = sc.robot.start
+    static = clear.static_distances(x, y, yaw)
+    peds = np.array([p.waypoints[0] for p in sc.pedestrians], float).reshape(-1, 2)
+    moving = clear.pedestrian_distances(x, y, yaw, peds)
+    for dist, names in ((static, clear.names), (moving, [f"pedestrians[{k}]" for k in range(len(peds))])):
+        if len(dist) and dist.min() <= 0.0:
+            k = int(np.argmin(dist))
+            raise UserError(f"the robot ({2 * clear.outline.half_x:.2f} x {2 * clear.outline.half_y:.2f} m at the "
+                            f"start pose) overlaps {names[k]} by {-dist[k]:.3f} m; move the start or the obstacle",
+                            file=file, field="robot.start")
+    if not len(static):
+        return
+    gx, gy = sc.robot.goal
+    # the robot's centre anywhere within GOAL_REGION_M of the goal (the goal, two rings), at one of 8 headings
+    centres = [(gx, gy)] + [(gx + r * math.cos(a), gy + r * math.sin(a)) for r in (0.5 * GOAL_REGION_M, GOAL_REGION_M)
+                            for a in np.linspace(0, 2 * math.pi, 12, endpoint=False)]
+    best = -math.inf
+    for cx, cy in centres:
+        for heading in np.linspace(0, math.pi, 8, endpoint=False):
+            d = clear.static_distances(cx, cy, heading).min()
+            if d > 0:
+                return
+            best = max(best, d)
+    k = int(np.argmin(clear.static_distances(gx, gy, yaw)))
+    raise UserError(f"the robot does not fit anywhere in the goal region ({GOAL_REGION_M:g} m around the goal): "
+                    f"{clear.names[k]} covers it", file=file, field="robot.goal")
 
 
 def describe(path: Path) -> str:

@@ -198,14 +198,25 @@ class EpisodeVideo:
         self.writer.write(self.overlay.frame(rec))
 
     def close(self) -> None:
-        self.writer.close()
+        """Finish the video (it appears at its path only now)."""
+        try:
+            self.writer.close()
+        finally:
+            self.renderer.close()
+
+    def abort(self) -> None:
+        """Drop the unfinished video (its path is left as it was)."""
+        self.writer.abort()
         self.renderer.close()
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 def side_by_side(inputs: list[str | Path], out: str | Path, fps: float) -> int:

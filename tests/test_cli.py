@@ -26,7 +26,7 @@ def test_demo_prints_commanded_and_achieved(capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["run", "required_sidestepping", "--seed", "-1"], "argument --seed: expected a number >= 0, got -1"),
+    (["run", "required_sidestepping", "--seed", "-1"], "argument --seed: expected a seed in [0, 4294967295], got -1"),
     (["run", "required_sidestepping", "--seed", "1.5"], "argument --seed: expected a whole number, got '1.5'"),
     (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "inf"],
      "argument --duration: expected a finite number, got 'inf'"),

@@ -34,7 +34,8 @@ BASE = 'name = "x"\ndescription = "d"\ntime_limit_s = 10\n[robot]\nstart = [0, 0
 
 @pytest.mark.parametrize("extra, field, words", [
     ("colour = 3\n", "colour", "unknown key"),
-    ("[[pedestrians]]\nname = 'p'\nwaypoints = [[0, 1]]\nspeed_mps = 1\n", "pedestrians[0]", "at least 2 waypoints"),
+    ("[[pedestrians]]\nname = 'p'\nwaypoints = [[0, 1]]\nspeed_mps = 1\n", "pedestrians[0].waypoints",
+     "at least 2 waypoints"),
     ("[[pedestrians]]\nname = 'p'\nwaypoints = [[0, 1], [1, 1]]\nspeed_mps = 'fast'\n", "pedestrians[0].speed_mps",
      "expected a number"),
     ("[[cylinders]]\ncenter = [1, { uniform = [2, 1] }]\nradius_m = 0.2\n", "cylinders[0].center[1]", "lo <= hi"),

@@ -273,12 +273,10 @@ def write_profile(cal: Calibration, path: str | Path) -> Path:
               "e_exec(u) = residual_horizon_s * interp(||u_xy||, residual_speed_mps, residual_bound_mps); "
               f"held-out coverage {cal.bound.coverage_heldout:.3f} (stated {cal.bound.coverage}).",
               "Use: bigcbf run ... --profile THIS.toml (overlays the stack parameters)."]
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text("".join(f"# {h}\n" for h in header) + tomli_w.dumps(data))
-    except OSError as exc:
-        raise UserError(f"cannot write: {exc.strerror}", file=str(p)) from None
-    load_stack_params(p)
+    from bigcbf.outputs import atomic_output
+    with atomic_output(p, "profile") as tmp:      # written beside the path, renamed to it once checked
+        tmp.write_text("".join(f"# {h}\n" for h in header) + tomli_w.dumps(data))
+        load_stack_params(tmp)
     return p
 
 

@@ -305,9 +305,9 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
 
     state["w"] = VideoWriter(path, fps=opt.video_fps)
     try:
-        simulate(data.cmd.t, data.cmd.u, data.odom, run.profile, scene=scene, frame=frame, fps=opt.video_fps)
+        with state["w"]:                 # an exception drops the unfinished video (the path stays as it was)
+            simulate(data.cmd.t, data.cmd.u, data.odom, run.profile, scene=scene, frame=frame, fps=opt.video_fps)
     finally:
-        state["w"].close()
         if "r" in state:
             state["r"].close()
 

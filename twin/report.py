@@ -10,12 +10,9 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
-
-from bigcbf.errors import UserError
 
 from .calibrate import Calibration
 from .execution import AXES
@@ -37,9 +34,13 @@ def _busiest_window(t: np.ndarray, u: np.ndarray, length: float) -> tuple[float,
 def _save(fig, path: Path) -> Path:
     """Lay out, write (110 dpi) and close a figure; returns its path."""
     import matplotlib.pyplot as plt
+    from bigcbf.outputs import atomic_output
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_output(path, "figure") as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -50,10 +51,8 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise UserError("exists and is not a folder", file=str(out))
-    out.mkdir(parents=True, exist_ok=True)
+    from bigcbf.outputs import check_output_dir, strict_json, write_text
+    out = check_output_dir(out_dir, "report folder")
     files = []
     a = cal.aligned
     t, u, v = a["t"], a["u"], a["v"]
@@ -123,5 +122,5 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     files.append(_save(fig, out / "residuals.png"))
 
     files.append(out / "calibration.json")
-    files[-1].write_text(json.dumps(cal.to_json(), indent=2))
+    write_text(files[-1], strict_json(cal.to_json(), indent=2), "calibration.json")
     return files

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from ..errors import UserError
+from ..outputs import atomic_output, check_output_dir, check_output_file, write_text
 from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
                     TABLE2_KEYS, display, ordered)
 
@@ -166,7 +167,7 @@ def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None) -> N
     labels = ["split", "family"] if groups else []
     cols = (list(KEY_FIELDS) + labels + ["status", "error"] + metric_cols
             + ["worker_wall_s", "host", "code_sha", "attempts"])
-    with Path(path).open("w", newline="") as fh:
+    with atomic_output(path, "episode table") as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for r in rows:
@@ -195,7 +196,7 @@ def _clean(o):
 
 
 def write_json(summary: dict, path: Path) -> None:
-    Path(path).write_text(json.dumps(_clean(summary), indent=2) + "\n")
+    write_text(path, json.dumps(_clean(summary), indent=2, allow_nan=False) + "\n", "summary")
 
 
 def _f(v, digits: int = 2) -> str:
@@ -425,8 +426,7 @@ def plot_heatmap(summary: dict, path: Path) -> None:
                      fontsize=10)
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.02, label="success (%)")
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    _savefig(fig, path)
 
 
 def plot_burden(summary: dict, path: Path) -> None:
@@ -464,8 +464,16 @@ def plot_burden(summary: dict, path: Path) -> None:
     fig.legend(handles, labels, fontsize=8, loc="outside lower center", ncol=2, frameon=False)
     fig.suptitle("Burden on the common CBF filter (lower: the planner's commands need less correction)",
                  fontsize=10)
-    fig.savefig(path)
-    plt.close(fig)
+    _savefig(fig, path)
+
+
+def _savefig(fig, path: Path) -> None:
+    import matplotlib.pyplot as plt
+    try:
+        with atomic_output(path, "figure") as tmp:
+            fig.savefig(tmp)
+    finally:
+        plt.close(fig)
 
 
 # --- everything at once --------------------------------------------------------------------------------------------
@@ -478,7 +486,7 @@ def write_reports(out: Path, rows: Sequence[dict], methods: Sequence[str], scena
     summary = build_summary(rows, methods, scenarios, seeds, info, groups)
     write_csv(rows, out / "episodes.csv", groups)
     write_json(summary, out / "summary.json")
-    (out / "summary.md").write_text(summary_markdown(summary))
+    write_text(out / "summary.md", summary_markdown(summary), "summary")
     plot_heatmap(summary, out / "success_heatmap.png")
     plot_burden(summary, out / "cbf_burden.png")
     return summary
@@ -488,25 +496,37 @@ def update_docs_page(page: Path, out: Path) -> None:
     """Put a bench's results into a Markdown page, between the DOCS_BEGIN and DOCS_END marker lines, and copy the
     figures to ``<page dir>/<page stem>/`` (e.g. docs/benchmark.md -> docs/benchmark/success_heatmap.png)."""
     page, out = Path(page), Path(out)
-    try:
-        text = page.read_text()
-    except OSError as exc:
-        raise UserError(f"cannot read the page ({exc.strerror})", file=str(page)) from None
-    if text.count(DOCS_BEGIN) != 1 or text.count(DOCS_END) != 1 or text.index(DOCS_BEGIN) > text.index(DOCS_END):
-        raise UserError(f"the page needs one line '{DOCS_BEGIN}' and, after it, one line '{DOCS_END}'",
-                        file=str(page))
+    text = check_docs_page(page)
     try:
         summary = json.loads((out / "summary.json").read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise UserError(f"no readable summary.json ({exc})", file=str(out / "summary.json")) from None
     img_dir = page.parent / page.stem
-    img_dir.mkdir(parents=True, exist_ok=True)
     for name in FIGURES:
-        shutil.copyfile(out / name, img_dir / name)
+        with atomic_output(img_dir / name, "figure") as tmp:
+            shutil.copyfile(out / name, tmp)
     body = summary_markdown(summary, level=3, image_dir=f"{page.stem}/")
     head, rest = text.split(DOCS_BEGIN)
     _, tail = rest.split(DOCS_END)
-    page.write_text(f"{head}{DOCS_BEGIN}\n{body}{DOCS_END}{tail}")
+    write_text(page, f"{head}{DOCS_BEGIN}\n{body}{DOCS_END}{tail}", "page")
+
+
+def check_docs_page(page: Path) -> str:
+    """``bench --docs PAGE`` before the bench runs: the page is a readable UTF-8 file with the two marker lines,
+    and it and its figure folder can be written. Returns its text."""
+    page = Path(page)
+    try:
+        text = page.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise UserError(f"cannot read the page ({exc.strerror or exc})", file=str(page)) from None
+    except UnicodeDecodeError:
+        raise UserError("the page is not UTF-8 text", file=str(page)) from None
+    if text.count(DOCS_BEGIN) != 1 or text.count(DOCS_END) != 1 or text.index(DOCS_BEGIN) > text.index(DOCS_END):
+        raise UserError(f"the page needs one line '{DOCS_BEGIN}' and, after it, one line '{DOCS_END}'",
+                        file=str(page))
+    check_output_file(page, "page")
+    check_output_dir(page.parent / page.stem, "page's figure folder")
+    return text
 
 
 def default_order(methods: Iterable[str], scenarios: Iterable[str]) -> tuple[list[str], list[str]]:
@@ -515,4 +535,4 @@ def default_order(methods: Iterable[str], scenarios: Iterable[str]) -> tuple[lis
 
 
 __all__ = ["summarize", "build_summary", "write_csv", "write_json", "summary_markdown", "plot_heatmap",
-           "plot_burden", "write_reports", "update_docs_page", "default_order", "TABLE2_KEYS"]
+           "plot_burden", "write_reports", "update_docs_page", "check_docs_page", "default_order", "TABLE2_KEYS"]

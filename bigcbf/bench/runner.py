@@ -61,7 +61,10 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     """The bench's tasks (seed-major), and its methods and scenario names in report order.
 
     Checks everything a user can get wrong before any episode starts: unknown method or scenario, a scenario file
-    that does not load for one of the seeds, two files with the same scenario name, seeds, workers.
+    that does not load, two files with the same scenario name, seeds, workers. Each scenario's world is drawn and
+    checked for every seed when there are at most ``CHECK_ALL_SEEDS`` seeds, else for a sample of that size (the
+    first half of it, the last seed, and the rest spread evenly), so that planning stays fast; a draw that fails
+    for another seed is recorded as that episode's error row when it runs (and the bench exits with status 1).
     """
     from ..config import RunConfig
     from ..control.methods import resolve_method
@@ -100,7 +103,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
             raise UserError(f"cannot read the scenario file ({exc})", file=str(path)) from None
         _, profile_text = base_profile_text(path)
         name = None
-        for seed in config.seeds:        # every seed's draw must be valid before we start
+        for seed in seed_sample(config.seeds):     # the draws must be valid before we start (see above)
             name = load_scenario(path, seed, robot_profile_text=profile_text).name
         if name in scen:
             raise UserError(f"two scenarios are named {name!r}; a bench needs distinct names", file=str(path))
@@ -111,6 +114,21 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
                          robot_profile_toml=scen[n][2])
              for seed in config.seeds for n in names for m in methods]
     return tasks, methods, names
+
+
+#: plan() draws every seed's world of each scenario up to this many seeds, a sample of this size beyond
+CHECK_ALL_SEEDS = 200
+
+
+def seed_sample(seeds, size: int = CHECK_ALL_SEEDS) -> list[int]:
+    """All of ``seeds`` if there are at most ``size``, else the first size // 2, the last one and the rest spread
+    evenly over the list (in the list's order, no duplicates)."""
+    seeds = list(seeds)
+    if len(seeds) <= size:
+        return seeds
+    head = size // 2
+    spread = [head + round(j * (len(seeds) - 1 - head) / (size - head - 1)) for j in range(size - head)]
+    return [seeds[i] for i in sorted(set(range(head)) | set(spread))]
 
 
 def _groups(config: BenchConfig) -> dict[str, dict[str, str]] | None:
@@ -127,7 +145,10 @@ class _DirLock:
 
     def __init__(self, out: Path):
         self.path = out / ".bench.lock"
-        self.fh = self.path.open("w")
+        try:
+            self.fh = self.path.open("w")
+        except OSError as exc:
+            raise UserError(f"cannot write in the output directory ({exc.strerror or exc})", file=str(out)) from None
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -140,13 +161,12 @@ class _DirLock:
 
 
 def _prepare_out(out: Path) -> Path:
+    """The output directory, created and checked writable (also for --report-only: the reports are written)."""
+    from ..outputs import check_output_dir
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise UserError("--out must be a directory, found a file", file=str(out))
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"cannot create the output directory ({exc.strerror})", file=str(out)) from None
+    check_output_dir(out, "output directory")
     return out
 
 

@@ -58,6 +58,13 @@ ROW_COLUMNS = KEY_COLUMNS + ("status", "error", "metrics", "worker_wall_s", "hos
                              "finished_utc", "attempts")
 
 
+def _environment_error(path: Path, exc: sqlite3.Error, fresh: bool = False) -> UserError:
+    """An SQLite error caused by the disk or the file system (full, read-only, I/O) as one line."""
+    what = "create" if fresh else "write"
+    return UserError(f"cannot {what} the results database ({exc}); the episodes already in it are kept: free space "
+                     "(or fix the file system) and rerun the same command to resume", file=str(path))
+
+
 class ResultStore:
     """The episodes table of one bench directory. Not shared between processes: only the parent writes."""
 
@@ -65,6 +72,7 @@ class ResultStore:
         self.path = Path(path)
         if self.path.is_dir():
             raise UserError("expected an SQLite database file, found a directory", file=str(self.path))
+        fresh = not self.path.exists() or self.path.stat().st_size == 0
         try:
             self.db = sqlite3.connect(self.path, timeout=30.0)
             self.db.execute("PRAGMA journal_mode=WAL")
@@ -81,11 +89,21 @@ class ResultStore:
             elif version[0] != SCHEMA_VERSION:
                 raise UserError(f"results schema {version[0]}, this bigcbf writes {SCHEMA_VERSION}; use a new --out",
                                 file=str(self.path))
+        except sqlite3.OperationalError as exc:       # the disk or the file system, not the file's content
+            raise _environment_error(self.path, exc, fresh) from None
         except sqlite3.DatabaseError as exc:
             raise UserError(f"not a bigcbf results database ({exc})", file=str(self.path)) from None
 
     def close(self) -> None:
         self.db.close()
+
+    def _write(self, sql: str, values: tuple) -> None:
+        """Execute one write and commit it; a full disk or a read-only file system is a UserError."""
+        try:
+            self.db.execute(sql, values)
+            self.db.commit()
+        except sqlite3.OperationalError as exc:
+            raise _environment_error(self.path, exc) from None
 
     def __enter__(self):
         return self
@@ -95,20 +113,17 @@ class ResultStore:
 
     # --- descriptions behind the hashes ---------------------------------------------------------------------
     def add_params(self, params_hash: str, perception: str, toml: str) -> None:
-        self.db.execute("INSERT OR IGNORE INTO params VALUES (?, ?, ?)", (params_hash, perception, toml))
-        self.db.commit()
+        self._write("INSERT OR IGNORE INTO params VALUES (?, ?, ?)", (params_hash, perception, toml))
 
     def add_scenario(self, scenario_sha: str, name: str, toml: str) -> None:
-        self.db.execute("INSERT OR IGNORE INTO scenarios VALUES (?, ?, ?)", (scenario_sha, name, toml))
-        self.db.commit()
+        self._write("INSERT OR IGNORE INTO scenarios VALUES (?, ?, ?)", (scenario_sha, name, toml))
 
     def add_run(self, *, started_utc: str, params_hash: str, engine: str, workers, host: str, episodes_run: int,
                 errors: int, wall_time_s: float, completed: bool) -> None:
         """Record one invocation that ran episodes (for the rate over a resumed bench)."""
-        self.db.execute("INSERT INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (started_utc, params_hash, engine, str(workers), host, episodes_run, errors, wall_time_s,
-                         int(completed)))
-        self.db.commit()
+        self._write("INSERT INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (started_utc, params_hash, engine, str(workers), host, episodes_run, errors, wall_time_s,
+                     int(completed)))
 
     def runs(self, params_hash: str | None = None) -> list[dict]:
         cols = ("started_utc", "params_hash", "engine", "workers", "host", "episodes_run", "errors", "wall_time_s",
@@ -125,7 +140,7 @@ class ResultStore:
                   None if row.get("metrics") is None else json.dumps(row["metrics"], allow_nan=True),
                   row.get("worker_wall_s"), row.get("host"), row.get("pid"), row.get("code_sha"),
                   datetime.now(timezone.utc).isoformat(timespec="seconds"))
-        self.db.execute(
+        self._write(
             "INSERT INTO episodes (scenario, method, seed, params_hash, scenario_sha, status, error, metrics, "
             "worker_wall_s, host, pid, code_sha, finished_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) "
             "ON CONFLICT (scenario, method, seed, params_hash, scenario_sha) DO UPDATE SET "
@@ -133,7 +148,6 @@ class ResultStore:
             "worker_wall_s=excluded.worker_wall_s, host=excluded.host, pid=excluded.pid, code_sha=excluded.code_sha, "
             "finished_utc=excluded.finished_utc, attempts=episodes.attempts + 1 "
             "WHERE episodes.status != 'ok'", values)
-        self.db.commit()
 
     def ok_keys(self) -> set[tuple]:
         """Keys of the episodes that finished without error (these are not run again)."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 
 def _float(s: str) -> float:
@@ -15,14 +16,18 @@ def _float(s: str) -> float:
     return v
 
 
+#: seeds are 32-bit: 0 .. 4294967295 (the same range for run, demo, record and bench)
+MAX_SEED = 2**32 - 1
+
+
 def nonneg_int(s: str) -> int:
-    """A whole number >= 0 (seeds)."""
+    """A seed: a whole number in [0, MAX_SEED]."""
     try:
         v = int(s)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {v}")
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {s[:40]!r}") from None
+    if not 0 <= v <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected a seed in [0, {MAX_SEED}], got {s[:40]}")
     return v
 
 
@@ -42,3 +47,10 @@ def float_in(lo: float, hi: float, what: str = "a number"):
             raise argparse.ArgumentTypeError(f"expected {what} in [{lo:g}, {hi:g}), got {v}")
         return v
     return parse
+
+
+def path_arg(s: str) -> Path:
+    """A file or folder path; an empty string is refused (Path("") would silently mean the current folder)."""
+    if not s.strip():
+        raise argparse.ArgumentTypeError("expected a path, got an empty string")
+    return Path(s)

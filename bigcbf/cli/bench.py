@@ -1,7 +1,9 @@
 """bigcbf bench: the paper's benchmark (methods x scenarios x seeds), resumable, on local cores or Ray."""
 from __future__ import annotations
 
-from pathlib import Path
+import os
+
+from .argtypes import path_arg
 
 HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite, resumable; "
         "write episodes.csv, summary.json/.md and figures")
@@ -9,7 +11,7 @@ HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite
 
 
 def add_arguments(p):
-    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+    p.add_argument("--out", type=path_arg, required=True, metavar="DIR",
                    help="output directory (created; rerunning with the same DIR resumes)")
     p.add_argument("--methods", nargs="+", default=None, metavar="M",
                    help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
@@ -23,7 +25,8 @@ def add_arguments(p):
                    help="only the suite's scenarios of this split (generated: dev or test; default: all)")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
-                       help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper)")
+                       help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper; at most "
+                            "10000)")
     seeds.add_argument("--seed-list", nargs="+", default=None, metavar="SEED", help="these seeds instead")
     p.add_argument("--workers", default=None, metavar="K",
                    help="parallel episodes (default: one per core; with --engine ray: the cluster's CPUs)")
@@ -31,10 +34,10 @@ def add_arguments(p):
                    help="local process pool (default) or Ray tasks (pip install 'bigcbf[ray]')")
     p.add_argument("--ray-address", default=None, metavar="ADDR",
                    help="an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray instance")
-    p.add_argument("--config", type=Path, default=None, metavar="RUN.toml",
+    p.add_argument("--config", type=path_arg, default=None, metavar="RUN.toml",
                    help="run configuration ([stack], [perception], [pedestrians], [methods.NAME]); the whole "
                         "configuration is part of the episode key")
-    p.add_argument("--profile", type=Path, default=None,
+    p.add_argument("--profile", type=path_arg, default=None,
                    help="stack parameters / uncertainty profile TOML over the configuration's [stack] (default: the "
                         "suite's; for paper, Table I with the twin-calibrated profile of the simulated X3); part of "
                         "the episode key")
@@ -42,20 +45,30 @@ def add_arguments(p):
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",
                    help="run nothing: rebuild the outputs from the episodes already in DIR/results.sqlite")
-    p.add_argument("--docs", type=Path, default=None, metavar="PAGE",
+    p.add_argument("--docs", type=path_arg, default=None, metavar="PAGE",
                    help="also put the results into this Markdown page between its bench-results markers")
     p.add_argument("--progress", choices=["auto", "on", "off"], default="auto",
                    help="progress bar (default: only on a terminal)")
 
 
-def _int(value: str, option: str, minimum: int) -> int:
+#: the most seeds one bench runs (200 x the paper's 50; 720,000 episodes with the paper's 8 methods and 9 scenes)
+MAX_SEEDS = 10_000
+#: the most local worker processes per core (each holds a MuJoCo model and the stack, ~200 MB)
+MAX_WORKERS_PER_CORE = 4
+#: the most Ray tasks in flight / cluster CPUs one bench asks for
+MAX_RAY_WORKERS = 10_000
+
+
+def _int(value: str, option: str, minimum: int, maximum: int | None = None) -> int:
     from ..errors import UserError
     try:
         v = int(value)
     except (TypeError, ValueError):
-        raise UserError(f"{option} expects a whole number, got {value!r}") from None
+        raise UserError(f"{option} expects a whole number, got {str(value)[:40]!r}") from None
     if v < minimum:
         raise UserError(f"{option} must be >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise UserError(f"{option} must be <= {maximum}, got {str(value)[:40]}")
     return v
 
 
@@ -64,15 +77,20 @@ def config_from_args(args):
     (one line, exit 2)."""
     from ..api import bench_config
     from ..bench.suites import SUITES
+    from ..errors import UserError
+    from .argtypes import MAX_SEED
     from .run import stderr_note
 
     if args.seed_list is not None:
-        seeds = tuple(_int(s, "--seed-list", 0) for s in args.seed_list)
+        if len(args.seed_list) > MAX_SEEDS:
+            raise UserError(f"--seed-list: at most {MAX_SEEDS} seeds in one bench, got {len(args.seed_list)}")
+        seeds = tuple(_int(s, "--seed-list", 0, MAX_SEED) for s in args.seed_list)
     elif args.seeds is not None:
-        seeds = _int(args.seeds, "--seeds", 1)
+        seeds = _int(args.seeds, "--seeds", 1, MAX_SEEDS)
     else:
         seeds = SUITES.get(args.suite).default_seeds
-    workers = None if args.workers is None else _int(args.workers, "--workers", 1)
+    max_workers = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1) if args.engine == "local" else MAX_RAY_WORKERS
+    workers = None if args.workers is None else _int(args.workers, "--workers", 1, max_workers)
     return bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
                         workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
                         profile=args.profile, perception=args.perception, split=args.split,
@@ -80,10 +98,12 @@ def config_from_args(args):
 
 
 def run(args) -> int:
-    from ..bench.report import update_docs_page
+    from ..bench.report import check_docs_page, update_docs_page
     from ..bench.runner import run_bench
 
     config = config_from_args(args)
+    if args.docs is not None:            # before the bench: a page that cannot take the results fails now
+        check_docs_page(args.docs)
     progress = {"auto": None, "on": True, "off": False}[args.progress]
     outcome = run_bench(config, progress=progress, report_only=args.report_only)
     if args.docs is not None:

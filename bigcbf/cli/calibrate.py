@@ -1,20 +1,17 @@
 """bigcbf calibrate: the shared-uncertainty terms of Eq. (15) (tau95, A, d, e_exec, e_ZOH) from a robot log."""
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
-from .argtypes import float_in, positive_float
+from .argtypes import float_in, path_arg, positive_float
 
 HELP = "calibrate tau95, the execution model (A, d, residual bound e_exec) and e_ZOH from a robot log"
 
 
 def add_arguments(p):
-    p.add_argument("log", type=Path, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
-    p.add_argument("--out", type=Path, default=None, metavar="PROFILE.toml",
+    p.add_argument("log", type=path_arg, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
+    p.add_argument("--out", type=path_arg, default=None, metavar="PROFILE.toml",
                    help="write the uncertainty profile (use with bigcbf run --profile)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--report", type=Path, default=None, metavar="DIR", help="write plots and calibration.json here")
+    p.add_argument("--report", type=path_arg, default=None, metavar="DIR", help="write plots and calibration.json here")
     p.add_argument("--cmd-topic", default=None, help="command topic (Twist/TwistStamped; default: found by type)")
     p.add_argument("--odom-topic", default=None, help="odometry topic (nav_msgs/Odometry; default: found by type)")
     p.add_argument("--scan-topic", default=None, help="laser scan topic for the perception latency (default: by type)")
@@ -35,8 +32,13 @@ def run(args) -> int:
     from twin.calibrate import CalibrationOptions, calibrate_series, read_log, summary_lines, write_profile
 
     from ..errors import UserError
+    from ..outputs import check_output_dir, check_output_file, strict_json
     if args.no_scan and args.scan_topic is not None:
         raise UserError("--scan-topic and --no-scan contradict each other: give one")
+    if args.out is not None:                 # before the work: a path that cannot be written fails now
+        check_output_file(args.out, "profile")
+    if args.report is not None:
+        check_output_dir(args.report, "report folder")
     opt = CalibrationOptions()
     opt = replace(opt, residual=replace(opt.residual, coverage=args.coverage),
                   delay=replace(opt.delay, scan_clock=args.scan_clock), max_command_age_s=args.cmd_timeout)
@@ -51,7 +53,7 @@ def run(args) -> int:
     if args.json:
         out = cal.to_json()
         out["written"] = [str(p) for p in written]
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         print("\n".join(summary_lines(cal)))
         for p in written:

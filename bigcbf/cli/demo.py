@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import nonneg_int
+from .argtypes import nonneg_int, path_arg
 
 HELP = ("required sidestepping, CBF-only vs BIG-CBF on one seed: renders/demo_required_sidestep.mp4 and both "
         "metric rows (--manoeuvre: the scripted robot drive)")
@@ -26,7 +26,7 @@ SEGMENTS = [
 
 def add_arguments(p):
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
-    p.add_argument("--video", type=Path, default=None,
+    p.add_argument("--video", type=path_arg, default=None,
                    help="output MP4 (default renders/demo_required_sidestep.mp4, or renders/demo.mp4 with --manoeuvre)")
     p.add_argument("--no-video", action="store_true", help="skip rendering, print the metrics only")
     p.add_argument("--manoeuvre", action="store_true", help="the scripted robot drive instead of the scenario")
@@ -34,11 +34,14 @@ def add_arguments(p):
 
 def run(args) -> int:
     from .. import RENDERS
+    from ..outputs import check_output_file
     if args.manoeuvre:
         args.video = args.video or RENDERS / "demo.mp4"
-        return run_manoeuvre(args)
-    args.video = args.video or RENDERS / "demo_required_sidestep.mp4"
-    return run_sidestep(args)
+    else:
+        args.video = args.video or RENDERS / "demo_required_sidestep.mp4"
+    if not args.no_video:
+        check_output_file(args.video, "video")
+    return run_manoeuvre(args) if args.manoeuvre else run_sidestep(args)
 
 
 def run_sidestep(args) -> int:
@@ -106,9 +109,14 @@ def run_manoeuvre(args) -> int:
                                      f"true vx {s.vx:+.2f}  vy {s.vy:+.2f}  wz {s.wz:+.2f}"])
                     writer.write(frame)
             rows.append((label, (vx, vy, wz), np.mean(achieved, axis=0)))
-    finally:
+    except BaseException:
+        if writer is not None:
+            writer.abort()              # no half-written video; the path stays as it was
+        raise
+    else:
         if writer is not None:
             writer.close()
+    finally:
         if renderer is not None:
             renderer.close()
     print(f"{'segment':<12} {'commanded (vx, vy, wz)':>26} {'achieved (vx, vy, wz)':>26}")

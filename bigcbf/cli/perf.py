@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import importlib
-import json
 
 HELP = "measure speed: physics, LiDAR, perception, planners, CBF-QP, episodes (prints one JSON object with --json)"
 
@@ -39,7 +38,8 @@ def run(args) -> int:
         fn = getattr(importlib.import_module(mod_name), fn_name)
         out.update(fn(quick=args.quick))
     if args.json:
-        print(json.dumps(out, sort_keys=True))
+        from ..outputs import strict_json
+        print(strict_json(out, sort_keys=True))
     else:
         width = max(map(len, out), default=0)
         for k in sorted(out):

@@ -1,19 +1,18 @@
 """bigcbf replay: drive the MuJoCo model with a log's commands and compare with its odometry."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from .argtypes import positive_float
+from .argtypes import path_arg, positive_float
 
 HELP = "replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted); errors, video"
 
 
 def add_arguments(p):
-    p.add_argument("log", type=Path, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
-    p.add_argument("--profile", type=Path, default=None, metavar="PROFILE.toml",
+    p.add_argument("log", type=path_arg, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
+    p.add_argument("--profile", type=path_arg, default=None, metavar="PROFILE.toml",
                    help="uncertainty profile whose execution model (A, d) is replayed (default: calibrate the log)")
-    p.add_argument("--video", type=Path, default=None, metavar="PATH.mp4",
+    p.add_argument("--video", type=path_arg, default=None, metavar="PATH.mp4",
                    help="top view with the logged and simulated paths (H.264 MP4)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--fit", action="store_true",
@@ -21,17 +20,17 @@ def add_arguments(p):
     p.add_argument("--window", type=positive_float, default=5.0, metavar="S", help="pose-drift window in seconds (5)")
     p.add_argument("--cmd-topic", default=None, help="command topic (default: found by type)")
     p.add_argument("--odom-topic", default=None, help="odometry topic (default: found by type)")
-    p.add_argument("--save-robot-profile", type=Path, default=None, metavar="PATH.toml",
+    p.add_argument("--save-robot-profile", type=path_arg, default=None, metavar="PATH.toml",
                    help="write the calibrated (or fitted) simulator robot profile (for bigcbf record calibration)")
 
 
 def run(args) -> int:
-    from ..errors import UserError
+    from ..outputs import check_output_file, strict_json
     from ..params.toml_io import save
 
     for path, what in ((args.video, "video"), (args.save_robot_profile, "robot profile")):
-        if path is not None and path.is_dir():
-            raise UserError(f"{what} path is a directory", file=str(path))
+        if path is not None:                 # before the replay: a path that cannot be written fails now
+            check_output_file(path, what)
     from twin.replay import ReplayOptions, replay_log
 
     res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit), video=args.video,
@@ -41,7 +40,7 @@ def run(args) -> int:
         save(best.profile, args.save_robot_profile,
              header=f"Simulator robot profile ({best.name}) that replays {args.log}; from `bigcbf replay`.")
     if args.json:
-        print(json.dumps(res.to_json()))
+        print(strict_json(res.to_json()))
         return 0
     print(f"replay of {args.log}: velocity RMSE (vx m/s, vy m/s, wz rad/s) and pose drift over {args.window:g} s "
           f"windows, simulated odometry vs logged")

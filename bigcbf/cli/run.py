@@ -1,10 +1,8 @@
 """bigcbf run: one episode of a scenario with a method and a seed."""
 from __future__ import annotations
 
-import json
-from pathlib import Path
 
-from .argtypes import nonneg_int
+from .argtypes import nonneg_int, path_arg
 
 HELP = "run one episode (scenario name or .toml file, method, seed); print its metrics, optionally a video/log"
 
@@ -14,18 +12,18 @@ def add_arguments(p):
     p.add_argument("--method", default="big-cbf", metavar="M",
                    help="planner (default big-cbf): a name from 'bigcbf methods' or package.module:Class")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the paired world (default 0)")
-    p.add_argument("--config", type=Path, default=None, metavar="RUN.toml",
+    p.add_argument("--config", type=path_arg, default=None, metavar="RUN.toml",
                    help="run configuration: [stack], [perception], [pedestrians], [methods.NAME] tables "
                         "(docs/extending.md; default: every default)")
-    p.add_argument("--profile", type=Path, default=None,
+    p.add_argument("--profile", type=path_arg, default=None,
                    help="stack parameters / calibrated uncertainty profile TOML over the configuration's [stack] "
                         "(default: Table I with the twin-calibrated profile of the simulated X3, "
                         "bigcbf/profiles/stack/x3_sim.toml)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
-    p.add_argument("--video", type=Path, default=None, help="write an H.264 MP4 of the episode")
+    p.add_argument("--video", type=path_arg, default=None, help="write an H.264 MP4 of the episode")
     p.add_argument("--camera", choices=["top", "track"], default="top", help="video view (default top)")
-    p.add_argument("--log", type=Path, default=None, help="record the episode as ROS 2 MCAP")
+    p.add_argument("--log", type=path_arg, default=None, help="record the episode as ROS 2 MCAP")
     p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
                    help="stream the log's topics to Foxglove while the episode runs at real time (WebSocket on "
                         "127.0.0.1:PORT, default 8765; pip install 'bigcbf[live]')")
@@ -59,6 +57,7 @@ def start_live(port: int):
 
 def run(args) -> int:
     from ..api import load_config, run_episode
+    from ..outputs import strict_json
 
     config = load_config(args.config, args.profile, notes=stderr_note)
     live = None
@@ -72,7 +71,7 @@ def run(args) -> int:
             live.close()
     out = res.metrics()
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         for k, v in out.items():
             if k == "mode_history":

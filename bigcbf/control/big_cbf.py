@@ -14,7 +14,7 @@ from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
 from .imagination import Imagination, choose_release, imagine
-from .planner import PlanInfo, clip_command
+from .planner import PlanInfo, clip_command, fail_safe
 from .selection import BehaviorSelector, Selection
 
 _T_EPS = 1e-6   # tolerance of the selection clock [s] (control ticks are floats)
@@ -76,6 +76,7 @@ class BigCbfPlanner:
         self.last_imagination, self.last_selection = img, sel
         return sel
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)

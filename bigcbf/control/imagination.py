@@ -29,6 +29,7 @@ from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
                         MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, goal_basis, mode_indices,
                         obstacle_groups, release_directions_c, release_velocity, speed_limits)
+from .faults import perception_fault
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
 
@@ -273,7 +274,13 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
 
     The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
     shot over (behaviors, steps, obstacles).
+
+    Inputs with a perception fault (``bigcbf.control.faults``) raise ValueError: a NaN would make every comparison
+    false and rollouts NaN; the planner brakes before it gets here (``planner.fail_safe``).
     """
+    why = perception_fault(state, obstacles, goal)
+    if why is not None:
+        raise ValueError(f"imagine: perception fault ({why}); the planner brakes instead (control/faults.py)")
     unc, ex = params.uncertainty, params.uncertainty.execution
     N = params.N
     goal = np.asarray(goal, float)

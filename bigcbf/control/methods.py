@@ -28,7 +28,7 @@ from ..registry import Registry
 from ..types import Obstacles, RobotState
 from .behaviors import behavior_command
 from .big_cbf import BigCbfPlanner
-from .planner import PlanInfo, Planner, clip_command
+from .planner import PlanInfo, Planner, clip_command, fail_safe
 
 METHODS: Registry[Callable[[StackParams], Planner]] = Registry("method")
 
@@ -44,6 +44,7 @@ class CbfOnlyPlanner:
     def reset(self, seed: int) -> None:
         """Stateless and deterministic: nothing to reset."""
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         u = clip_command(behavior_command("GOAL", state, obstacles, np.asarray(goal, float).reshape(2), self.params),

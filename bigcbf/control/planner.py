@@ -1,6 +1,8 @@
 """The planner protocol every method implements (BIG-CBF and each baseline) and its info record."""
 from __future__ import annotations
 
+import functools
+import time
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -8,6 +10,7 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
+from .faults import FAULT_MODE, perception_fault
 
 _TINY = 1e-12
 
@@ -50,3 +53,17 @@ def clip_command(u, params: StackParams) -> np.ndarray:
     u[..., 0] *= scale
     u[..., 1] *= scale
     return np.clip(u, np.asarray(params.u_min, float), np.asarray(params.u_max, float))
+
+
+def fail_safe(plan):
+    """Decorate a planner's ``plan``: on a perception fault (``bigcbf.control.faults``: non-finite or implausible
+    obstacle estimates, robot state or goal) return u_in = 0 with mode "FAULT" without calling ``plan``, so the
+    planner's internal state (warm starts, selection clock) never sees the faulty numbers."""
+    @functools.wraps(plan)
+    def guarded(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
+        t0 = time.perf_counter()
+        if perception_fault(state, obstacles, goal) is None:
+            return plan(self, t, state, obstacles, goal)
+        return np.zeros(3), PlanInfo(mode=FAULT_MODE, planned=False, planner_ms=(time.perf_counter() - t0) * 1e3,
+                                     path=None)
+    return guarded

@@ -80,3 +80,6 @@ class EpisodeLogger:
 
     def close(self) -> None:
         self.writer.close()
+
+    def abort(self) -> None:
+        self.writer.abort()

@@ -95,13 +95,15 @@ class LogWriter:
                  metadata: dict[str, str] | None = None):
         from mcap_ros2.writer import Writer
 
+        from ..outputs import AtomicFile
         self.path = Path(path)
         if self.path.is_dir():
             raise UserError("is a directory, expected an .mcap file path", file=str(self.path))
+        self._file = AtomicFile(self.path, "log")     # written beside the path, renamed to it by close()
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(self.path, "wb")
+            self._fh = open(self._file.tmp, "wb")
         except OSError as exc:
+            self._file.discard()
             raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
         self._w = Writer(self._fh, chunk_size=CHUNK_BYTES)
         self._schemas: dict[str, object] = {}
@@ -124,7 +126,12 @@ class LogWriter:
                 topic=topic, message_encoding="cdr", schema_id=schema.id,
                 metadata={"offered_qos_profiles": LATCHED_QOS})
         ns = convert.to_ns(t)
-        self._w.write_message(topic, schema, message, log_time=ns, publish_time=ns, sequence=self.counts.get(topic, 0))
+        try:
+            self._w.write_message(topic, schema, message, log_time=ns, publish_time=ns,
+                                  sequence=self.counts.get(topic, 0))
+        except OSError as exc:       # a full disk, say: drop the unfinished log, say so in one line
+            self.abort()
+            raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     # --- the topics of an episode ----------------------------------------------------------------------------
@@ -190,15 +197,33 @@ class LogWriter:
 
     # --- life cycle ------------------------------------------------------------------------------------------
     def close(self) -> None:
+        """Finish the log; it appears at its path only now."""
         if self._fh is not None:
             try:
-                self._w.finish()
-            finally:
+                try:
+                    self._w.finish()
+                finally:
+                    self._fh.close()
+                    self._fh = None
+            except OSError as exc:
+                self._file.discard()
+                raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
+            self._file.commit()
+
+    def abort(self) -> None:
+        """Drop the unfinished log (its path is left as it was)."""
+        if self._fh is not None:
+            try:
                 self._fh.close()
+            finally:
                 self._fh = None
+                self._file.discard()
 
     def __enter__(self) -> "LogWriter":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()

@@ -27,11 +27,19 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..errors import FieldError
 from .robot import IDENTITY3, Mat3, Vec3
 from .toml_io import from_dict, load_toml, save, to_dict
 
 __all__ = ["ExecutionModel", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
            "load_stack_params", "save_stack_params", "default_stack_params", "stack_profile_path", "read_provenance"]
+
+
+#: caps that keep any parameter file from hanging or exhausting the machine: imagination steps, the control
+#: period (the simulator's 2 ms physics step is the shortest), residual-bound knots
+MAX_N = 500
+MIN_T_C_S = 0.002
+MAX_KNOTS = 100
 
 
 def _finite(name: str, *values: float) -> None:
@@ -67,19 +75,20 @@ class ExecutionModel:
         _finite("A", *(x for row in self.A for x in row))
         _finite("d", *self.d)
         ks, bs = self.residual_speed_mps, self.residual_bound_mps
-        if len(ks) == 0 or len(ks) != len(bs):
-            raise ValueError("residual_speed_mps and residual_bound_mps must be non-empty and of equal length")
+        if len(ks) == 0 or len(ks) != len(bs) or len(ks) > MAX_KNOTS:
+            raise ValueError(f"residual_speed_mps and residual_bound_mps must be non-empty, of equal length and at "
+                             f"most {MAX_KNOTS} long")
         _finite("residual knots", *ks, *bs)
         if ks[0] != 0.0:
-            raise ValueError("residual_speed_mps must start at 0")
+            raise FieldError("residual_speed_mps", "must start at 0")
         if any(b <= a for a, b in zip(ks, ks[1:])):
-            raise ValueError("residual_speed_mps must be strictly increasing")
+            raise FieldError("residual_speed_mps", "must be strictly increasing")
         if any(b < 0 for b in bs):
-            raise ValueError("residual_bound_mps must be >= 0")
+            raise FieldError("residual_bound_mps", "must be >= 0")
         if not (self.residual_horizon_s >= 0 and math.isfinite(self.residual_horizon_s)):
-            raise ValueError("residual_horizon_s must be >= 0")
+            raise FieldError("residual_horizon_s", "must be >= 0")
         if not (0.0 < self.residual_coverage <= 1.0):
-            raise ValueError("residual_coverage must be in (0, 1]")
+            raise FieldError("residual_coverage", "must be in (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -116,7 +125,7 @@ class UncertaintyParams:
             vals["kappa_img_static"] = self.kappa_img_static
         for k, v in vals.items():
             if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{k} must be a finite number >= 0, got {v}")
+                raise FieldError(k, f"must be a finite number >= 0, got {v}")
 
 
 @dataclass(frozen=True)
@@ -182,7 +191,7 @@ class StackParams:
                    v_side_mps=self.v_side_mps, v_release_mps=self.v_release_mps)
         for k, v in pos.items():
             if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{k} must be a finite number > 0, got {v}")
+                raise FieldError(k, f"must be a finite number > 0, got {v}")
         nonneg = dict(v_freeze_mps=self.v_freeze_mps, eps_h_m2=self.eps_h_m2, w_W=self.w_W, w_P=self.w_P,
                       w_F=self.w_F, w_sw=self.w_sw, w_S=self.w_S, release_range_m=self.release_range_m,
                       d_pass_min_m=self.d_pass_min_m, relevant_range_m=self.relevant_range_m,
@@ -190,20 +199,24 @@ class StackParams:
                       noshared_margin_m=self.noshared_margin_m)
         for k, v in nonneg.items():
             if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{k} must be a finite number >= 0, got {v}")
-        if self.N < 1:
-            raise ValueError("N must be >= 1")
-        if self.T_B_s < self.T_C_s:
-            raise ValueError("T_B_s must be >= T_C_s")
-        if self.max_obstacle_constraints < 0 or self.wall_sectors < 0:
-            raise ValueError("max_obstacle_constraints and wall_sectors must be >= 0")
+                raise FieldError(k, f"must be a finite number >= 0, got {v}")
+        if not 1 <= self.N <= MAX_N:
+            raise FieldError("N", f"must be in [1, {MAX_N}]")
+        if not MIN_T_C_S <= self.T_C_s <= 1.0:
+            raise FieldError("T_C_s", f"must be in [{MIN_T_C_S:g}, 1] s (the simulator steps at 2 ms)")
+        if not self.T_C_s <= self.T_B_s <= 60.0:
+            raise FieldError("T_B_s", "must be in [T_C_s, 60] s")
+        if self.dt_s > 1.0:
+            raise FieldError("dt_s", "must be <= 1 s")
+        if not (0 <= self.max_obstacle_constraints <= 1000 and 0 <= self.wall_sectors <= 360):
+            raise ValueError("max_obstacle_constraints must be in [0, 1000] and wall_sectors in [0, 360]")
         _finite("u_min/u_max", *self.u_min, *self.u_max)
         if not all(lo <= 0.0 <= hi for lo, hi in zip(self.u_min, self.u_max)):
             raise ValueError("the actuator box u_min <= u <= u_max must contain 0 on every axis")
         if not all(h > 0 and math.isfinite(h) for h in self.H_diag):
-            raise ValueError("H_diag must be > 0 (H positive definite)")
+            raise FieldError("H_diag", "must be > 0 (H positive definite)")
         if not all(r >= 0 and math.isfinite(r) for r in self.R_u_diag):
-            raise ValueError("R_u_diag must be >= 0")
+            raise FieldError("R_u_diag", "must be >= 0")
 
     @property
     def weights(self) -> tuple[float, float, float, float, float]:

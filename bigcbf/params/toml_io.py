@@ -7,6 +7,7 @@ Unknown keys are errors; missing keys take the dataclass default (which is docum
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tomllib
 import types
@@ -16,9 +17,20 @@ from typing import Any, TypeVar
 
 import tomli_w
 
-from ..errors import UserError
+from ..errors import FieldError, UserError
 
 T = TypeVar("T")
+
+
+#: every number in a parameter or scenario file lies within +-MAX_ABS_NUMBER (no product of a few of them can
+#: overflow a float; each class documents its own, tighter ranges)
+MAX_ABS_NUMBER = 1e9
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr(value), cut to one short line (error messages stay one line for any input)."""
+    text = " ".join(repr(value).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _type_name(tp: Any) -> str:
@@ -35,29 +47,35 @@ def _convert(tp: Any, value: Any, file: str | None, field: str) -> Any:
         return _convert(non_none[0], value, file, field)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise UserError(f"expected a table, got {value!r}", file=file, field=field)
+            raise UserError(f"expected a table, got {_short(value)}", file=file, field=field)
         return from_dict(tp, value, file=file, prefix=field)
     if tp is bool:
         if not isinstance(value, bool):
-            raise UserError(f"expected true or false, got {value!r}", file=file, field=field)
+            raise UserError(f"expected true or false, got {_short(value)}", file=file, field=field)
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise UserError(f"expected an integer, got {value!r}", file=file, field=field)
+            raise UserError(f"expected an integer, got {_short(value)}", file=file, field=field)
+        if abs(value) > MAX_ABS_NUMBER:
+            raise UserError(f"expected a number within +-{MAX_ABS_NUMBER:g}, got {_short(value)}", file=file,
+                            field=field)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise UserError(f"expected a number, got {value!r}", file=file, field=field)
+            raise UserError(f"expected a number, got {_short(value)}", file=file, field=field)
         if not math.isfinite(value):
             raise UserError(f"expected a finite number, got {value!r}", file=file, field=field)
+        if abs(value) > MAX_ABS_NUMBER:
+            raise UserError(f"expected a number within +-{MAX_ABS_NUMBER:g}, got {_short(value)}", file=file,
+                            field=field)
         return float(value)
     if tp is str:
         if not isinstance(value, str):
-            raise UserError(f"expected a string, got {value!r}", file=file, field=field)
+            raise UserError(f"expected a string, got {_short(value)}", file=file, field=field)
         return value
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
-            raise UserError(f"expected an array, got {value!r}", file=file, field=field)
+            raise UserError(f"expected an array, got {_short(value)}", file=file, field=field)
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_convert(args[0], v, file, f"{field}[{j}]") for j, v in enumerate(value))
         if len(value) != len(args):
@@ -66,10 +84,15 @@ def _convert(tp: Any, value: Any, file: str | None, field: str) -> Any:
     raise TypeError(f"unsupported field type {_type_name(tp)} for {field}")
 
 
+@functools.lru_cache(maxsize=None)
+def _fields(cls: type) -> tuple[dict, dict]:
+    """A dataclass's resolved type hints and init fields (resolving hints is slow; classes do not change)."""
+    return typing.get_type_hints(cls), {f.name: f for f in dataclasses.fields(cls) if f.init}
+
+
 def from_dict(cls: type[T], data: dict, *, file: str | None = None, prefix: str = "") -> T:
     """Build the frozen dataclass ``cls`` from a TOML table; unknown keys and bad values raise UserError."""
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints, fields = _fields(cls)
     kwargs = {}
     for key, value in data.items():
         name = f"{prefix}.{key}" if prefix else key
@@ -83,22 +106,64 @@ def from_dict(cls: type[T], data: dict, *, file: str | None = None, prefix: str 
         return cls(**kwargs)
     except UserError:
         raise
+    except FieldError as exc:               # __post_init__ validation that names its field
+        raise UserError(str(exc), file=file, field=f"{prefix}.{exc.field}" if prefix else exc.field) from None
     except (ValueError, TypeError) as exc:  # __post_init__ validation
         raise UserError(str(exc), file=file, field=prefix or None) from None
 
 
+#: deepest nesting of tables and arrays accepted in a TOML file (the shipped files use 3; deeper is a mistake, and
+#: Python's TOML parser would exhaust its recursion limit on a few thousand levels)
+MAX_TOML_DEPTH = 32
+
+
+def _depth(node, limit: int) -> int:
+    """Nesting depth of parsed TOML (stops counting past ``limit``)."""
+    stack, deepest = [(node, 0)], 0
+    while stack:
+        n, d = stack.pop()
+        deepest = max(deepest, d)
+        if deepest > limit:
+            break
+        if isinstance(n, dict):
+            stack.extend((v, d + 1) for v in n.values())
+        elif isinstance(n, list):
+            stack.extend((v, d + 1) for v in n)
+    return deepest
+
+
+def parse_toml(text: str, file: str | None = None) -> dict:
+    """Parse TOML text; a syntax error or too deep a nesting is a UserError naming ``file``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"not valid TOML: {exc}", file=file) from None
+    except RecursionError:
+        raise UserError(f"tables or arrays nested deeper than {MAX_TOML_DEPTH} levels", file=file) from None
+    if _depth(data, MAX_TOML_DEPTH) > MAX_TOML_DEPTH:
+        raise UserError(f"tables or arrays nested deeper than {MAX_TOML_DEPTH} levels", file=file)
+    return data
+
+
 def load_toml(path: str | Path) -> dict:
-    """Read a TOML file; a missing or malformed file is a UserError naming it."""
+    """Read a TOML file (UTF-8, as TOML requires); a missing, unreadable, binary or malformed file is a UserError
+    naming it."""
     p = Path(path)
     try:
-        with p.open("rb") as fh:
-            return tomllib.load(fh)
+        raw = p.read_bytes()
     except FileNotFoundError:
         raise UserError("file not found", file=str(p)) from None
     except IsADirectoryError:
         raise UserError("is a directory, expected a TOML file", file=str(p)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"not valid TOML: {exc}", file=str(p)) from None
+    except OSError as exc:
+        raise UserError(f"cannot read the file ({exc.strerror or exc})", file=str(p)) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise UserError(f"not a UTF-8 text file (byte 0x{raw[exc.start]:02x} on line {line}); TOML files are "
+                        "UTF-8: re-save it as UTF-8", file=str(p)) from None
+    return parse_toml(text, str(p))
 
 
 def load(cls: type[T], path: str | Path, *, table: str | None = None) -> T:
@@ -126,10 +191,9 @@ def to_dict(obj: Any) -> dict:
 
 
 def save(obj: Any, path: str | Path, *, header: str = "") -> None:
-    """Write a dataclass as TOML (never overwrites silently a directory; parents are created)."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
+    """Write a dataclass as TOML, atomically (a temporary file renamed over ``path``; parents are created)."""
+    from ..outputs import write_text
     text = tomli_w.dumps(to_dict(obj))
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
-    p.write_text(text)
+    write_text(path, text, "TOML file")

@@ -236,35 +236,79 @@ def put_text(frame: np.ndarray, lines: Iterable[str], origin=(10, 24), scale: fl
 
 
 class VideoWriter:
-    """H.264 (yuv420p) MP4 writer; frames are RGB uint8 arrays of one size. Use as a context manager."""
+    """H.264 (yuv420p) MP4 writer; frames are RGB uint8 arrays of one size. Use as a context manager.
+
+    The video is written to a temporary file beside ``path`` and renamed to ``path`` by ``close()`` (an
+    exception inside the ``with`` block, or ``abort()``, deletes it instead: an existing file at ``path`` is
+    never half-overwritten). If ffmpeg stops (a full disk, say), ``write`` raises a UserError naming the path
+    and ffmpeg's reason."""
 
     def __init__(self, path: str | Path, fps: float = 20.0):
         import imageio_ffmpeg
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.fps = fps
         self._ffmpeg = imageio_ffmpeg
         self._gen = None
+        self._file = None
         self.frames = 0
 
     def write(self, frame: np.ndarray) -> None:
+        from ..outputs import AtomicFile
         frame = np.ascontiguousarray(frame, dtype=np.uint8)
-        if self._gen is None:
-            h, w = frame.shape[:2]
-            self._gen = self._ffmpeg.write_frames(str(self.path), (w, h), fps=self.fps, codec="libx264",
-                                                  pix_fmt_out="yuv420p", quality=7, macro_block_size=16,
-                                                  output_params=["-movflags", "+faststart"])
-            self._gen.send(None)
-        self._gen.send(frame)
+        try:
+            if self._gen is None:
+                self._file = AtomicFile(self.path, "video")
+                h, w = frame.shape[:2]
+                self._gen = self._ffmpeg.write_frames(str(self._file.tmp), (w, h), fps=self.fps, codec="libx264",
+                                                      pix_fmt_out="yuv420p", quality=7, macro_block_size=16,
+                                                      output_params=["-movflags", "+faststart"])
+                self._gen.send(None)
+            self._gen.send(frame)
+        except OSError as exc:                   # BrokenPipeError included: ffmpeg has exited
+            self.abort()
+            raise _ffmpeg_error(self.path, exc) from None
         self.frames += 1
 
     def close(self) -> None:
+        """Finish the video and move it to ``path``."""
         if self._gen is not None:
-            self._gen.close()
-            self._gen = None
+            gen, self._gen = self._gen, None
+            try:
+                gen.close()
+            except (OSError, RuntimeError) as exc:
+                self.abort()
+                raise _ffmpeg_error(self.path, exc) from None
+        if self._file is not None:
+            f, self._file = self._file, None
+            f.commit()
+
+    def abort(self) -> None:
+        """Stop ffmpeg and delete the unfinished video (``path`` is left as it was)."""
+        gen, self._gen = self._gen, None
+        if gen is not None:
+            try:
+                gen.close()
+            except Exception:  # noqa: BLE001 - ffmpeg may already be gone; the file is deleted either way
+                pass
+        if self._file is not None:
+            f, self._file = self._file, None
+            f.discard()
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def _ffmpeg_error(path: Path, exc: BaseException):
+    """A UserError with ffmpeg's own last line of explanation (imageio-ffmpeg puts its stderr in the message)."""
+    from ..errors import UserError
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    reason = lines[-1] if lines else type(exc).__name__
+    if isinstance(exc, BrokenPipeError) or "FFMPEG STDERR" in reason:
+        reason = "ffmpeg stopped"
+    return UserError(f"cannot write the video ({reason})", file=str(path))

@@ -125,8 +125,11 @@ def compose(spec: SceneSpec) -> mjcf.RootElement:
                     pos=(o.x, o.y, o.height / 2), rgba=OBSTACLE_RGBA, group=1)
     for p in spec.pedestrians:
         body = wb.add("body", name=f"ped_{p.name}", mocap=True, pos=(p.x, p.y, 0))
-        half = max(p.height / 2 - p.radius, 0.01)
-        _world_geom(body, name=f"ped_{p.name}", type="capsule", size=(p.radius, half), pos=(0, 0, p.radius + half),
+        # the capsule's lower sphere is centred on the floor (its lower half is under it, where nothing collides
+        # with it): at every height the robot's body and LiDAR reach, the pedestrian has its full radius, the one
+        # the clearance metric uses (sim/truth.py)
+        half = max((p.height - p.radius) / 2, 0.01)
+        _world_geom(body, name=f"ped_{p.name}", type="capsule", size=(p.radius, half), pos=(0, 0, half),
                     rgba=PEDESTRIAN_RGBA, group=2)
     if spec.goal is not None:
         wb.add("site", name="goal", type="cylinder", size=(0.15, 0.002), pos=(*spec.goal, 0.002),

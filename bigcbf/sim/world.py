@@ -150,6 +150,11 @@ class SimWorld:
         return RobotState(float(d.qpos[q]), float(d.qpos[q + 1]), _yaw(d.qpos[q + 3:q + 7]),
                           float(vb[0]), float(vb[1]), float(wb[2]))
 
+    def pose(self) -> tuple[float, float, float]:
+        """The true planar pose (x [m], y [m], yaw [rad]) in the world (cheaper than ``true_state``)."""
+        d, q = self.data, self._qadr
+        return float(d.qpos[q]), float(d.qpos[q + 1]), _yaw(d.qpos[q + 3:q + 7])
+
     def wheel_speeds(self) -> np.ndarray:
         return self.data.qvel[self._wheel_dof].copy()
 

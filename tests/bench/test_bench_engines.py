@@ -97,3 +97,13 @@ def test_plan_rejects_user_mistakes(tmp_path, short_scenarios):
     f.write_text("x")
     with pytest.raises(UserError, match="must be a directory"):
         run_bench(config(f, short_scenarios), episode_fn=testing.fake_episode, progress=False)
+
+
+def test_plan_checks_every_seed_up_to_200_then_a_spread_sample():
+    from bigcbf.bench.runner import CHECK_ALL_SEEDS, seed_sample
+    assert seed_sample(range(5)) == [0, 1, 2, 3, 4]
+    assert seed_sample(range(CHECK_ALL_SEEDS)) == list(range(CHECK_ALL_SEEDS))
+    s = seed_sample(range(10_000))
+    assert len(s) == CHECK_ALL_SEEDS and s[:100] == list(range(100)) and s[-1] == 9_999
+    assert s == sorted(set(s)) and max(b - a for a, b in zip(s, s[1:])) < 10_000 / 90
+    assert seed_sample([7, 3, 9] * 1 + list(range(100, 400)))[:3] == [7, 3, 9]     # in the list's order

@@ -64,11 +64,14 @@ def test_uncertainty_profile_round_trip(tmp_path):
     ("dt_s = 'fast'", "dt_s", "expected a number"),
     ("u_max = [0.8, 0.8]", "u_max", "3 values"),
     ("[uncertainty.execution]\nresidual_speed_mps = [0.0, 0.8, 0.4]\nresidual_bound_mps = [0.1, 0.1, 0.1]",
-     "uncertainty.execution", "strictly increasing"),
-    ("[uncertainty.execution]\nresidual_speed_mps = [0.1, 0.8]", "uncertainty.execution", "start at 0"),
-    ("[uncertainty]\nbeta = -1.0", "uncertainty", "beta"),
+     "uncertainty.execution.residual_speed_mps", "strictly increasing"),
+    ("[uncertainty.execution]\nresidual_speed_mps = [0.1, 0.8]", "uncertainty.execution.residual_speed_mps",
+     "start at 0"),
+    ("[uncertainty]\nbeta = -1.0", "uncertainty.beta", "finite number >= 0"),
     ("u_min = [0.1, -0.8, -1.0]", None, "contain 0"),
-    ("N = 0", None, "N must be"),
+    ("N = 0", "N", "must be in [1, 500]"),
+    ("T_C_s = 0.0001", "T_C_s", "the simulator steps at 2 ms"),
+    ("alpha_per_s = 1e300", "alpha_per_s", "within +-1e+09"),
 ])
 def test_bad_files_name_file_and_key(tmp_path, text, field, words):
     f = tmp_path / "bad.toml"

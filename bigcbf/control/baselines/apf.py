@@ -29,7 +29,7 @@ import numpy as np
 from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from .common import Geometry, at_goal, body_from_world, clip_command
 
 _TINY = 1e-12
@@ -87,6 +87,7 @@ class ApfPlanner:
     def reset(self, seed: int) -> None:
         """Stateless."""
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)

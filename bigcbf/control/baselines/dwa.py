@@ -38,7 +38,7 @@ import numpy as np
 from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from .common import Geometry, at_goal, clip_command, integrate, predict, surface_distance
 
 
@@ -123,6 +123,7 @@ class DwaPlanner:
     def reset(self, seed: int) -> None:
         """Stateless (a deterministic grid search)."""
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)

@@ -40,7 +40,7 @@ import numpy as np
 from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from .common import (Geometry, at_goal, barrier_along, body_from_world, clip_command, integrate, predict,
                      world_velocity)
 
@@ -169,6 +169,7 @@ class MppiPlanner:
         U = body_from_world(state.theta, self.V[None])
         self._path = integrate(state, U, p.dt_s, p)[0][0]
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         p = self.params

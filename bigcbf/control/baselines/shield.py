@@ -25,7 +25,7 @@ import numpy as np
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import behavior_command
-from ..planner import PlanInfo
+from ..planner import PlanInfo, fail_safe
 from ..uncertainty import nominal_velocity
 from .common import Geometry, Prediction, accel_limited, at_goal, barrier_along, body_from_world
 
@@ -93,6 +93,7 @@ class ShieldPlanner:
         """(u_in, mode, rollout path shown in videos)."""
         raise NotImplementedError
 
+    @fail_safe
     def plan(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> tuple[np.ndarray, PlanInfo]:
         t0 = time.perf_counter()
         goal = np.asarray(goal, float).reshape(2)
