@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from ..errors import UserError
-from ..outputs import atomic_output, check_output_dir, check_output_file, write_text
+from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
 from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
                     TABLE2_KEYS, display, ordered)
 
@@ -184,19 +184,9 @@ def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None) -> N
 
 # --- summary.json / summary.md -------------------------------------------------------------------------------------
 
-def _clean(o):
-    """JSON without NaN/Infinity (strict parsers reject them): non-finite floats become null."""
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
-    if isinstance(o, dict):
-        return {k: _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    return o
-
-
 def write_json(summary: dict, path: Path) -> None:
-    write_text(path, json.dumps(_clean(summary), indent=2, allow_nan=False) + "\n", "summary")
+    """summary.json, strict (non-finite numbers are null: strict parsers reject NaN and Infinity)."""
+    write_text(path, strict_json(summary, indent=2) + "\n", "summary")
 
 
 def _f(v, digits: int = 2) -> str:
