@@ -45,7 +45,8 @@ class SimWorld:
         # independent random streams, so that e.g. LiDAR noise does not change the execution residuals
         ss = np.random.SeedSequence(seed)
         rng_exec, rng_lidar = (np.random.default_rng(s) for s in ss.spawn(2))
-        self.imperfection = ImperfectionLayer(profile, rng_exec)
+        self.imperfection = ImperfectionLayer(profile, rng_exec,
+                                              kinematics.half_wheelbase_m + kinematics.half_track_m)
         self.lidar = Lidar(self.model, lidar, rng_lidar)
         m = self.model
         self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{w}_wheel") for w in WHEELS])
@@ -100,7 +101,12 @@ class SimWorld:
                 hook(self)
             t = d.time
             twist = imp.at(t)
-            if twist is not self._ctrl_for:            # wheel targets change only with the executed twist
+            if imp.limiter is not None:                # the firmware's wheel limits (robot profile)
+                lim = imp.limiter.update(t, twist)
+                if self._ctrl_for is None or not np.array_equal(lim, self._ctrl_for):
+                    self._ctrl_for, self._ctrl = lim.copy(), self.kin.inverse(lim)
+                    d.ctrl[self._act] = self._ctrl
+            elif twist is not self._ctrl_for:          # wheel targets change only with the executed twist
                 self._ctrl_for, self._ctrl = twist, self.kin.inverse(twist)
                 d.ctrl[self._act] = self._ctrl
             nb = min(n, self.BLOCK_STEPS)
