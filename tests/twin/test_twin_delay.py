@@ -164,5 +164,8 @@ def test_estimate_delay_recovers_latency_and_jitter_distribution():
     assert len(est.edge_delays_s) > 100
     # commands at 20 Hz, scans at 10 Hz: ages 0 and 0.05 -> the sum's 95 % quantile = 0.05 + actuation's upper part
     assert set(np.round(est.perception_latency_s, 6)) == {0.0, 0.05}
-    assert est.tau95_s == pytest.approx(tau95(est.edge_delays_s, est.perception_latency_s))
+    # tau95 from the translational axes' edges (Eq. (15) multiplies it by a translational velocity)
+    assert est.tau95_axes == (0, 1)
+    trans = np.isin(est.edge_axes, [0, 1])
+    assert est.tau95_s == pytest.approx(tau95(est.edge_delays_s[trans], est.perception_latency_s))
     assert est.actuation95_s < est.tau95_s <= est.actuation95_s + 0.05 + 1e-9
