@@ -68,6 +68,7 @@ class AxisDelay:
     runner_up_peak: float = float("nan")
     edges: int = 0                   # clean edges on this axis
     edge_median_s: float = float("nan")  # their median half-way delay [s]
+    curve: np.ndarray | None = None      # the correlation curve over the lags (for the report)
 
     @property
     def tie(self) -> bool:
@@ -292,7 +293,7 @@ def axis_delays(u_grid, v_grid, valid, axes, opt: "DelayOptions", seed: int = 0)
         lo, hi = np.quantile(d_boot, [0.05, 0.95])
         r_s, r_p = ties(curve, opt.grid_s, opt.tie_ratio, opt.tie_separation_s)
         out[int(j)] = AxisDelay(int(j), _refine(curve, k) * opt.grid_s, (float(lo), float(hi)), float(curve[k]),
-                                r_s, r_p)
+                                r_s, r_p, curve=curve)
     return out
 
 

@@ -21,8 +21,10 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    on a grid (0 to 0.6 m; fixed when the log does not move both translation and yaw) and v_max on a grid of the
    samples' rim demands max|R p|, the squared error of the saturating model (per axis, scaled by the command's
    spread); the best pair, the samples it saturates left out, A and d refitted, three times. The limit is reported
-   when it saturates at least ``min_saturated`` samples (and ``min_saturated_fraction`` of them) and cuts the error
-   of a linear model fitted on every settled sample by ``improvement``; otherwise the log does not reach one.
+   when it saturates at least ``min_saturated`` samples (and ``min_saturated_fraction`` of them), cuts the error of
+   those samples against a linear model fitted on every settled sample by ``improvement``, and cuts the total
+   error by at least 30 times the mean error per sample (a change the noise cannot make); otherwise the log does
+   not reach one.
 2. dynamic part, on every sample of the calibration blocks: the model simulated on a 10 ms grid (the commands
    box-averaged over each step and the prediction interpolated to the odometry times, so that the fit moves
    smoothly with L) for a batch of candidates at once: a common dead time L and lag T without acceleration limit;
@@ -180,10 +182,19 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
     vm, k, _ = best
     p = u @ A.T + d
     D = rim_demand(p, k)
-    n_sat = int(np.sum(D > 1.02 * vm)) if vm is not None else 0
-    cost_sat = float(cost(saturate(p, vm, k))) if vm is not None else cost_lin
+    beyond = D > 1.02 * vm if vm is not None else np.zeros(len(u), bool)
+    n_sat = int(beyond.sum())
+    pred = saturate(p, vm, k) if vm is not None else p
+    cost_sat = float(cost(pred)) if vm is not None else cost_lin
+    # the limit must explain the samples beyond it (their error against the linear model cut by ``improvement``)
+    # and be significant against the noise of the rest (the cut at least 30 times the mean error per sample)
+    lin = u @ A_lin.T + d_lin
+    sc_idx = sc[idx]
+    e_lin_b = float((((v[beyond][:, idx] - lin[beyond][:, idx]) / sc_idx) ** 2).sum())
+    e_sat_b = float((((v[beyond][:, idx] - pred[beyond][:, idx]) / sc_idx) ** 2).sum())
+    noise = cost_sat / max(len(u), 1)
     reached = (vm is not None and n_sat >= max(opt.min_saturated, opt.min_saturated_fraction * len(u))
-               and cost_sat <= (1 - opt.improvement) * cost_lin)
+               and e_sat_b <= (1 - opt.improvement) * e_lin_b and cost_lin - cost_sat > 30 * noise)
     near = levers[prof <= 1.02 * np.min(prof)] if np.isfinite(prof).any() else levers
     lever_range = (float(near.min()), float(near.max()))
     lever_ok = lever_id and reached and (lever_range[1] - lever_range[0]) <= 0.25 * opt.lever_max_m

@@ -13,8 +13,9 @@ delays measured on them carry the transport's jitter. So, for the odometry (:fun
    could have been received: the measurement time plus the smallest transport latency);
 3. no usable stamps and bursty receive times (more than 1 % of the intervals shorter than a fifth of the nominal
    period): a robust time base, the lower envelope of the receive times at the nominal period, t_i =
-   min over j in [i, i + 50) of (r_j - (j - i) P) within stretches without gaps (a message cannot have been produced
-   after a later one was received, less the periods in between), P the stretch's mean period;
+   min over j in [i - 25, i + 25] of (r_j - (j - i) P) within stretches without gaps (messages are produced every
+   P and none is received before it was produced: each r_j - (j - i) P bounds message i's production time from
+   above), P the median over the stretch of (r_(i+50) - r_i) / 50;
 4. otherwise the receive times.
 
 Twist (:func:`odometry_twist`): the odometry message's own twist when it has one; when every twist is zero while
@@ -74,7 +75,8 @@ def bursty(t_recv: np.ndarray, period_s: float, fraction: float = 0.01) -> float
 
 def lower_envelope(t_recv: np.ndarray, gap_s: float, window: int = ENVELOPE_WINDOW) -> np.ndarray:
     """The robust time base of rule 3 (module docstring): within each stretch without gaps longer than ``gap_s``,
-    t_i = min over j in [i, i + window) of (r_j - (j - i) P), P = the stretch's mean period."""
+    t_i = min over j within window / 2 of i of (r_j - (j - i) P), P = the stretch's median period over ``window``
+    messages."""
     r = np.asarray(t_recv, float)
     out = r.copy()
     cuts = np.flatnonzero(np.diff(r) > gap_s) + 1
@@ -82,12 +84,14 @@ def lower_envelope(t_recv: np.ndarray, gap_s: float, window: int = ENVELOPE_WIND
         n = b - a
         if n < 3:
             continue
-        P = (r[b - 1] - r[a]) / (n - 1)
+        K = min(window, n - 1)
+        P = float(np.median((r[a + K:b] - r[a:b - K]) / K))
         idx = np.arange(n)
         z = r[a:b] - idx * P
-        zpad = np.concatenate([z, np.full(window - 1, np.inf)])
+        w = window // 2
+        zpad = np.concatenate([np.full(w, np.inf), z, np.full(w, np.inf)])
         from numpy.lib.stride_tricks import sliding_window_view
-        out[a:b] = sliding_window_view(zpad, window).min(axis=1) + idx * P
+        out[a:b] = sliding_window_view(zpad, 2 * w + 1).min(axis=1) + idx * P
     return out
 
 
