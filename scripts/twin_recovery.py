@@ -2,7 +2,7 @@
 
     .venv/bin/python scripts/twin_recovery.py --n 20 --seed 1000 [--duration 80] [--json out.json]
 
-For each of n profiles drawn at random (``draw_profile``: latency, jitter, diagonal gains, bias, residual noise, a
+For each of n profiles drawn at random (``twin.record.random_profile``: latency, jitter, diagonal gains, bias, residual noise, a
 wheel-speed limit and a wheel-acceleration limit, within the documented ranges of bigcbf/params/robot.py) the
 calibration drive is recorded in the simulator and calibrated; the figures are compared with the profile:
 
@@ -29,19 +29,10 @@ import numpy as np
 
 from bigcbf.params.robot import RobotProfile
 from twin.calibrate import calibrate_log
-from twin.record import record_calibration
+from twin.record import random_profile, record_calibration
 
 
-def draw_profile(rng: np.random.Generator) -> RobotProfile:
-    """A random profile with wheel limits, inside the documented ranges (limits that the drive reaches)."""
-    gains = rng.uniform(0.75, 1.15, 3)
-    return RobotProfile(
-        latency_s=float(rng.uniform(0.0, 0.25)), latency_jitter_s=float(rng.uniform(0.0, 0.04)),
-        gain=tuple(tuple(float(gains[i]) if i == j else 0.0 for j in range(3)) for i in range(3)),
-        bias=(float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.08, 0.08))),
-        residual_max=tuple(float(x) for x in rng.uniform(0.0, 0.04, 3)),
-        wheel_speed_max_mps=float(rng.uniform(0.35, 0.9)),
-        wheel_accel_max_mps2=float(np.exp(rng.uniform(np.log(0.8), np.log(8.0)))))
+draw_profile = random_profile
 
 
 def run(n: int, seed: int, duration: float) -> list[dict]:
@@ -72,21 +63,19 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
                 "v_max_true": prof.wheel_speed_max_mps, "v_max": st.v_max,
                 "accel_true": prof.wheel_accel_max_mps2, "accel": dyn.accel_max,
                 "gains_true": g.tolist(), "gains": np.diag(cal.fit.A).tolist(),
-                "gains_rel_ideal": (np.diag(cal.fit.A) / np.diag(ideal.fit.A)).tolist(),
                 "lever_m": st.lever_m, "lever_identified": st.lever_identified, "seconds": time.perf_counter() - t0}
             row["err_latency_s"] = row["latency_s"] - lat_true
             row["err_latency_vs_ideal_s"] = row["latency_vs_ideal_s"] - lat_true
             row["err_v_max"] = None if st.v_max is None else st.v_max / prof.wheel_speed_max_mps - 1
             row["err_accel"] = None if dyn.accel_max is None else dyn.accel_max / prof.wheel_accel_max_mps2 - 1
             row["err_gain"] = float(np.max(np.abs(np.diag(cal.fit.A) / g - 1)))
-            row["err_gain_rel_ideal"] = float(np.max(np.abs(np.array(row["gains_rel_ideal"]) / g - 1)))
             rows.append(row)
             f = lambda x, fmt: "none" if x is None else format(x, fmt)   # noqa: E731
             print(f"{i:3d} latency {lat_true:.3f} -> {row['latency_s']:.3f} s ({row['err_latency_s'] * 1e3:+5.1f} ms; "
                   f"vs ideal {row['err_latency_vs_ideal_s'] * 1e3:+5.1f})  "
                   f"v_max {prof.wheel_speed_max_mps:.3f} -> {f(st.v_max, '.3f')} ({f(row['err_v_max'], '+.1%')})  "
                   f"accel {prof.wheel_accel_max_mps2:.2f} -> {f(dyn.accel_max, '.2f')} ({f(row['err_accel'], '+.1%')})"
-                  f"  gains {row['err_gain']:.1%} (rel. ideal {row['err_gain_rel_ideal']:.1%})  "
+                  f"  gains {row['err_gain']:.1%}  "
                   f"lever {st.lever_m:.3f}{'' if st.lever_identified else '?'}  {row['seconds']:.0f} s", flush=True)
     return rows
 
@@ -94,7 +83,7 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
 def summary(rows: list[dict]) -> dict:
     out = {}
     for key, scale in (("err_v_max", 1), ("err_accel", 1), ("err_latency_s", 1), ("err_latency_vs_ideal_s", 1),
-                       ("err_gain", 1), ("err_gain_rel_ideal", 1)):
+                       ("err_gain", 1)):
         vals = [abs(r[key]) * scale for r in rows if r[key] is not None]
         missing = sum(r[key] is None for r in rows)
         out[key] = {"max": max(vals) if vals else None, "median": float(np.median(vals)) if vals else None,

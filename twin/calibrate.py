@@ -105,8 +105,20 @@ class Calibration:
 
     @property
     def latency_s(self) -> np.ndarray:
-        """The command-to-wheel latency per axis (the model's dead time; nan where not identified) [s]."""
-        return self.model.dynamic.latency_s if self.model is not None else np.full(3, np.nan)
+        """The command-to-wheel latency per axis: the model's dead time plus the time its first-order lag takes to
+        half a small step (T ln 2), i.e. the median delay of the response before any limit acts; nan where not
+        identified [s]. (Dead time and lag trade off against each other, against a latency jitter and behind an
+        acceleration ramp; their sum is what the log pins down.)"""
+        if self.model is None:
+            return np.full(3, np.nan)
+        return self.model.dynamic.latency_s + self.model.dynamic.lag_s * math.log(2)
+
+    @property
+    def latency_ci_s(self) -> np.ndarray:
+        """(3, 2): the 90 % bootstrap interval of :attr:`latency_s` [s]."""
+        if self.model is None:
+            return np.full((3, 2), np.nan)
+        return self.model.dynamic.latency_ci_s + self.model.dynamic.lag_s * math.log(2)
 
     def tau95_parts(self) -> Tau95Parts:
         d = self.delay
@@ -163,13 +175,15 @@ class Calibration:
     def to_json(self) -> dict:
         d = self.delay
         lat = self.latency_s
-        ci = self.model.dynamic.latency_ci_s if self.model is not None else np.full((3, 2), np.nan)
+        ci = self.latency_ci_s
+        dead = self.model.dynamic.latency_s if self.model is not None else np.full(3, np.nan)
         return jsonable({
             "log": self.log, "topics": self.topics, "duration_s": self.duration_s,
             "tau95_s": d.tau95_s, "tau95_parts": to_dict(self.tau95_parts()),
             "tau95_axes": [AXES[j] for j in d.tau95_axes],
-            "latency_s": {AXES[j]: {"dead_time": float(lat[j]), "ci90": ci[j].tolist()}
+            "latency_s": {AXES[j]: {"latency": float(lat[j]), "ci90": ci[j].tolist(), "dead_time": float(dead[j])}
                           for j in range(3) if np.isfinite(lat[j])},
+            "lag_s": self.model.dynamic.lag_s if self.model is not None else None,
             "delay": {"xcorr_s": d.xcorr_s, "actuation_median_s": d.actuation_median_s,
                       "actuation95_s": d.actuation95_s, "perception95_s": d.perception95_s,
                       "perception_source": d.perception_source, "edges": int(len(d.edge_delays_s)),
@@ -318,7 +332,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     nb = max(6, int(round((t[-1] - t[0]) / opt.block_s)))
     block = np.minimum(((t - t[0]) / max(t[-1] - t[0], 1e-9) * nb).astype(int), nb - 1)
     model = fit_model(cmd.t, cmd.u, t, v, axes, ~held, block, u0, settled0, opt.limits,
-                      min_settled=opt.execution.min_settled)
+                      min_settled=opt.execution.min_settled, avg_s=timing.period_s)
     # from here on the command in force is the one the model says acts: delayed by its dead time per axis
     u = np.where(model.scored[:, None], model.u_delayed, u0)
     st = model.static
@@ -471,15 +485,17 @@ def summary_lines(cal: Calibration) -> list[str]:
              f"({cal.timing.source if cal.timing is not None else 'receive times'}), scans {cal.topics['scans']})"]
     if cal.model is not None:
         dyn = cal.model.dynamic
-        lines.append("latency        command to wheel (dead time, 90 % interval): " + ", ".join(
-            f"{AXES[j]} {dyn.latency_s[j]:.3f} s [{dyn.latency_ci_s[j, 0]:.3f}, {dyn.latency_ci_s[j, 1]:.3f}]"
-            for j in ident) + f"; then a {dyn.lag_s * 1e3:.0f} ms lag")
+        lat, ci = cal.latency_s, cal.latency_ci_s
+        lines.append("latency        command to wheel (90 % interval): " + ", ".join(
+            f"{AXES[j]} {lat[j]:.3f} s [{ci[j, 0]:.3f}, {ci[j, 1]:.3f}]" for j in ident)
+            + f"  (dead time {', '.join(f'{dyn.latency_s[j]:.3f}' for j in ident)} s, then a {dyn.lag_s * 1e3:.0f} ms "
+            f"lag: + {dyn.lag_s * math.log(2) * 1e3:.0f} ms to half a step)")
     lines.append("delays         cross-correlation (90 % interval): " + ", ".join(
         f"{AXES[j]} {a.delay_s:.3f} s [{a.ci_s[0]:.3f}, {a.ci_s[1]:.3f}]" + (" NEAR TIE" if a.tie else "")
         for j, a in d.axes.items()) + f"; all axes {d.xcorr_s:.3f} s")
     p = cal.tau95_parts()
     lines.append(f"tau95          {d.tau95_s:.3f} s = 95 % of (actuation + perception): actuation on "
-                 f"{', '.join(AXES[j] for j in d.tau95_axes)} from {len(d.edge_delays_s)} edges (dead time "
+                 f"{', '.join(AXES[j] for j in d.tau95_axes)} from {len(d.edge_delays_s)} edges (latency "
                  f"{p.latency_s:.3f} s, half-way median {d.actuation_median_s:.3f} s, p95 {d.actuation95_s:.3f} s); "
                  f"perception p95 {d.perception95_s:.3f} s from {d.perception_source}")
     if cal.model is not None:

@@ -6,8 +6,8 @@ The program is a sequence of ~35-s cycles (the last one cut at the requested dur
   0.8-1.2 s, back to rest in between), which give clean command edges for the delay distribution and the gains;
 - random combined steps: all three axes change together to random levels within the limits (||u_xy|| up to the
   translational limit, so some combinations reach the wheels' limit and saturate), held 0.8-1.2 s;
-- corner steps: ||u_xy|| at its limit on a diagonal and wz at its limit, the largest wheel speeds the stack can
-  ask for (a wheel-speed limit below them is met), held 0.8-1.2 s;
+- corner steps: 90 % of the ||u_xy|| limit on a diagonal and of the wz limit, nearly the largest wheel speeds the
+  stack can ask for (a wheel-speed limit below them is met), held 0.8-1.2 s;
 - ramps (triangles) of each axis to its limit and back;
 - a chirp sweep of each axis (0.2 -> 1.5 Hz), which exercises the response at frequencies where the delay
   matters.
@@ -70,12 +70,13 @@ def _random_combined(rng, lim, dt, n):
 
 
 def _corners(rng, lim, dt, n=2):
-    """n segments at the corners of the command box: ||u_xy|| at its limit on a diagonal, wz at its limit (random
-    signs), and the mirror: the largest wheel speeds the stack can ask for, so that a wheel-speed limit is met."""
+    """n segments near the corners of the command box: 90 % of the ||u_xy|| limit on a diagonal and of the wz limit
+    (random signs), and the mirror: nearly the largest wheel speeds the stack can ask for, so that a wheel-speed
+    limit is met (90 %: the simulated robot's own wheels top out at 1.275 m/s, just below the corner itself)."""
     out = []
     for _ in range(n):
         sx, sy, sw = rng.choice([-1.0, 1.0], 3)
-        u = np.array([sx * lim[3] / np.sqrt(2), sy * lim[3] / np.sqrt(2), sw * lim[2]])
+        u = 0.9 * np.array([sx * lim[3] / np.sqrt(2), sy * lim[3] / np.sqrt(2), sw * lim[2]])
         u[0] = np.clip(u[0], -lim[0], lim[0])
         u[1] = np.clip(u[1], -lim[1], lim[1])
         hold = rng.uniform(0.8, 1.2)

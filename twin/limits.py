@@ -7,7 +7,8 @@ sign), so the limits are identified with the model they break, and A, d on the s
     p(t) = A u(t - L) + d                          Eq. (1) without the residual, inputs delayed per axis (L_j)
     s(t) = p(t) min(1, v_max / max|R p(t)|)        wheel-speed saturation, all wheels scaled together
     x'   = the step toward s limited so that max|R dx| <= a_max dt     wheel-acceleration limit
-    y'   = (x - y) / T                              the drive's first-order response (and the odometry's averaging)
+    y'   = (x - y) / T                              the drive's first-order response
+    v(t) = mean of y over [t - P, t]                the odometry's twist: encoder counts over its period P
 
 R (4x3) gives the wheel rim speeds of a twist, vx -+ vy -+ k wz (``rim_matrix``; for a differential drive, whose
 log never commands vy, the rows are its two wheels vx -+ k wz), with the yaw lever arm k (half wheelbase + half
@@ -18,9 +19,10 @@ wheel_accel_max_mps2), which is what ``bigcbf replay`` uses.
 Identification (:func:`fit_static`, :func:`fit_dynamic`):
 
 1. static part, on the settled samples (command held, response converged): A, d by least squares; then for each k
-   on a grid (0 to 0.6 m; fixed when the log does not move both translation and yaw) and v_max on a grid of the
+   on a grid (0.05 to 0.6 m; fixed when the log does not move both translation and yaw) and v_max on a grid of the
    samples' rim demands max|R p|, the squared error of the saturating model (per axis, scaled by the command's
-   spread); the best pair, the samples it saturates left out, A and d refitted, three times. The limit is reported
+   spread); the best pair, the samples that ask more than 95 % of the limit left out (near the kink a small error in
+   the limit would bias the gains), A and d refitted, three times. The limit is reported
    when it saturates at least ``min_saturated`` samples (and ``min_saturated_fraction`` of them), cuts the error of
    those samples against a linear model fitted on every settled sample by ``improvement``, and cuts the total
    error by at least 30 times the mean error per sample (a change the noise cannot make); otherwise the log does
@@ -47,12 +49,14 @@ AXES = ("vx", "vy", "wz")
 
 @dataclass(frozen=True)
 class LimitOptions:
-    lever_max_m: float = 0.6            # yaw lever arm grid 0..lever_max_m [m]
-    lever_steps: int = 61
+    lever_min_m: float = 0.05           # yaw lever arm grid lever_min_m..lever_max_m [m] (no base has its wheels
+    lever_max_m: float = 0.6            # closer than 5 cm to its centre)
+    lever_steps: int = 56
     speed_steps: int = 80               # rim-speed limit grid (quantiles of the demands)
     min_saturated: int = 20             # samples beyond the limit, at least [-]
     min_saturated_fraction: float = 0.01
     improvement: float = 0.3            # the saturating model cuts the linear model's error by this fraction [-]
+    kink_margin: float = 0.05           # A, d are fitted on samples asking at most (1 - this) of the limit [-]
     step_s: float = 0.01                # simulation grid of the dynamic fit [s]
     max_delay_s: float = 1.0            # dead-time search range [s]
     lags_s: tuple[float, ...] = (0.0, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)
@@ -137,7 +141,7 @@ def _lever_grid(axes: np.ndarray, opt: LimitOptions) -> tuple[np.ndarray, bool]:
     """(levers to try, whether the lever can be identified): both translation and yaw must be excited."""
     trans, yaw = bool(axes[0] or axes[1]), bool(axes[2])
     if trans and yaw:
-        return np.linspace(0.0, opt.lever_max_m, opt.lever_steps), True
+        return np.linspace(opt.lever_min_m, opt.lever_max_m, opt.lever_steps), True
     return np.array([0.0 if trans else 1.0]), False
 
 
@@ -171,7 +175,9 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
             prof[i] = c[g]
             cands.append((float(vm[g]), float(k), float(c[g])))
         vm, k, c = cands[int(np.argmin(prof))]
-        sat = rim_demand(p, k) > vm * (1 + 1e-9)
+        # A, d from the samples clearly below the limit: near the kink a small error in the limit or the lever
+        # would count saturated samples as linear ones and pull the gains down
+        sat = rim_demand(p, k) > vm * (1 - opt.kink_margin)
         if (~sat).sum() <= len(idx) + 1:
             break
         A_new, d_new = least_squares(u[~sat], v[~sat], axes)
@@ -256,6 +262,7 @@ class DynamicProblem:
     axes: np.ndarray        # identified axes
     static: StaticFit
     h: float = 0.01
+    avg_s: float = 0.0      # the odometry reports the mean twist over this span before its time [s]
 
     def __post_init__(self):
         self.integral = _Integral(self.t_cmd, self.u_cmd)
@@ -299,6 +306,10 @@ class DynamicProblem:
         lim = st.v_max
         has_a = np.isfinite(cand.a).any()
         u = np.empty((C, 3))
+        K = int(round(self.avg_s / self.h))            # the odometry's average: trapezoid over the last K steps
+        buf = [y.copy() for _ in range(K + 1)] if K > 0 else None
+        run = sum(buf) if K > 0 else None
+        ya = y.copy()
         for n in range(len(self.tg)):
             for j in range(3):
                 table, inv = cols[j]
@@ -313,13 +324,20 @@ class DynamicProblem:
                 x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
             else:
                 x = p
-            y_prev = y
             y = y + (x - y) * alpha
+            ya_prev = ya
+            if K > 0:
+                old = buf.pop(0)
+                buf.append(y)
+                run = run - old + y
+                ya = (run - 0.5 * (buf[0] + y)) / K
+            else:
+                ya = y
             ms = self._steps.get(n)
             if ms is not None:
                 for mi in ms:
                     f = (self.ts[mi] - self.tg[n - 1]) / self.h
-                    yi = y_prev + (y - y_prev) * f
+                    yi = ya_prev + (ya - ya_prev) * f
                     err[:, self.block[mi], :] += ((yi - self.vs[mi]) * wsc) ** 2
                     if keep:
                         pred[:, mi] = yi
@@ -413,7 +431,9 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
         if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
             notes.append(f"the {AXES[j]} dead time sits at the edge of its search ({lat[j]:.3f} s, common "
                          f"{L0:.3f} s +- 0.05 s): that axis responds unlike the others")
-    floor = float(acc[-2]) if not np.isfinite(a0) else float(a0)
+    if np.isfinite(a0) and a0 >= opt.accel_max:      # at the top of the grid: no limit the log can show
+        a0 = np.inf
+    floor = float(opt.accel_max) if not np.isfinite(a0) else float(a0)
     return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes)
 
 
@@ -430,8 +450,8 @@ class SaturatingModel:
     scored: np.ndarray       # (M,) samples inside the simulated span
 
 
-def _predict(t_cmd, u_cmd, t, v, axes, static: StaticFit, dyn: DynamicFit, h: float):
-    prob = DynamicProblem(t_cmd, u_cmd, t, v, np.ones(len(t), bool), np.zeros(len(t), int), axes, static, h)
+def _predict(t_cmd, u_cmd, t, v, axes, static: StaticFit, dyn: DynamicFit, h: float, avg_s: float = 0.0):
+    prob = DynamicProblem(t_cmd, u_cmd, t, v, np.ones(len(t), bool), np.zeros(len(t), int), axes, static, h, avg_s)
     _, y, s, u = prob.simulate(dyn.candidate(), keep=True)
     scored = np.zeros(len(t), bool)
     for ms in prob._steps.values():
@@ -449,23 +469,24 @@ def settled_by_model(y: np.ndarray, target: np.ndarray, axes: np.ndarray,
 
 
 def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_init: np.ndarray,
-              settled_init: np.ndarray, opt: LimitOptions = LimitOptions(), min_settled: int = 100) -> SaturatingModel:
+              settled_init: np.ndarray, opt: LimitOptions = LimitOptions(), min_settled: int = 100,
+              avg_s: float = 0.0) -> SaturatingModel:
     """Steps 1-2 of the module docstring, twice: the static part on the settled samples of the calibration blocks
     (``cal``; at first those of ``settled_init``, with the commands ``u_init``), the dynamic part on every sample of
     the calibration blocks; then the static part again on the samples the model says have settled (with the
     commands delayed by its dead times) and the dynamic part refined."""
     axes = np.asarray(axes, bool)
     st = fit_static(u_init[cal & settled_init], v[cal & settled_init], axes, opt)
-    prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s)
+    prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s, avg_s)
     dyn = fit_dynamic(prob, opt)
-    y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s)
+    y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
     settled = settled_by_model(y, s, axes) & scored
     use = cal & settled
     if use.sum() >= min_settled:
         st = fit_static(u[use], v[use], axes, opt)
-        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s)
+        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s, avg_s)
         a = np.inf if dyn.accel_max is None else dyn.accel_max
         dyn = fit_dynamic(prob, opt, start=(float(np.nanmedian(dyn.latency_s)), dyn.lag_s, a))
-        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s)
+        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
         settled = settled_by_model(y, s, axes) & scored
     return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored)

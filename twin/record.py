@@ -95,6 +95,21 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
             "recentrings": drive.recentrings, "warnings": world.warnings()}
 
 
+def random_profile(rng: np.random.Generator) -> RobotProfile:
+    """A random robot profile with wheel limits, inside the documented ranges of bigcbf/params/robot.py, for
+    recovery checks (tests/twin/test_twin_recovery.py, scripts/twin_recovery.py): latency U(0, 0.25) s, jitter
+    U(0, 0.04) s, diagonal gains U(0.75, 1.15), bias U(+-0.04) m/s and U(+-0.08) rad/s, residual U(0, 0.04), wheel
+    rim-speed limit U(0.35, 0.9) m/s, wheel acceleration limit log-uniform in [0.8, 8] m/s^2."""
+    gains = rng.uniform(0.75, 1.15, 3)
+    return RobotProfile(
+        latency_s=float(rng.uniform(0.0, 0.25)), latency_jitter_s=float(rng.uniform(0.0, 0.04)),
+        gain=tuple(tuple(float(gains[i]) if i == j else 0.0 for j in range(3)) for i in range(3)),
+        bias=(float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.08, 0.08))),
+        residual_max=tuple(float(x) for x in rng.uniform(0.0, 0.04, 3)),
+        wheel_speed_max_mps=float(rng.uniform(0.35, 0.9)),
+        wheel_accel_max_mps2=float(np.exp(rng.uniform(np.log(0.8), np.log(8.0)))))
+
+
 def averaged_twist(prev: RobotState, cur: RobotState, dt: float) -> RobotState:
     """``cur`` with its twist replaced by the average body twist since ``prev`` (dt seconds earlier): the pose
     change rotated into the body frame at the mid heading, divided by dt (encoder-count odometry)."""

@@ -93,7 +93,8 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
             tt = np.linspace(t_a, t_b, 2000)
             ax.step(tt - t[0], zoh(cmd_t, cmd_u[:, j], tt), where="post", color="0.6", lw=1, label="command as sent")
         ax.plot(t[sel] - t[0], u[sel, j], color="tab:blue", lw=1.0,
-                label=f"command delayed by the dead time ({lat[j] * 1e3:.0f} ms)")
+                label=f"command delayed by the dead time ({model.dynamic.latency_s[j] * 1e3:.0f} ms)"
+                if model is not None else "command")
         ax.plot(t[sel] - t[0], v[sel, j], color="tab:orange", lw=1.2, label="measured (odometry)")
         ax.plot(t[sel] - t[0], lin[sel, j], color="tab:green", lw=0.8, ls="--", label="Eq. (1): A u + d")
         if model is not None:
@@ -128,7 +129,7 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
             if ad.tie:
                 ax.axvline(ad.runner_up_s * 1e3, color="tab:orange", ls=":", label=f"near tie {ad.runner_up_s * 1e3:.0f} ms")
             if np.isfinite(lat[j]):
-                ax.axvline(lat[j] * 1e3, color="tab:purple", ls="-.", label=f"dead time {lat[j] * 1e3:.0f} ms")
+                ax.axvline(lat[j] * 1e3, color="tab:purple", ls="-.", label=f"latency {lat[j] * 1e3:.0f} ms")
             ax.set_ylabel(f"{AXES[j]}: correlation of changes")
             ax.legend(fontsize=7)
         ax = axs[j, 1]
@@ -167,7 +168,7 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
                + (" and the perception latency" if len(d.perception_latency_s) else ""))
     p = cal.tau95_parts()
     _empty(axs[2, 2], f"tau95 {d.tau95_s * 1e3:.0f} ms = 95 % of actuation + perception\n"
-           f"dead time {p.latency_s * 1e3:.0f} ms, half-way median {p.actuation_median_s * 1e3:.0f} ms,\n"
+           f"latency {p.latency_s * 1e3:.0f} ms, half-way median {p.actuation_median_s * 1e3:.0f} ms,\n"
            f"actuation p95 {p.actuation95_s * 1e3:.0f} ms, perception p95 {p.perception95_s * 1e3:.0f} ms")
     fig.suptitle("Delays per axis")
     files.append(_save(fig, out / "delay.png"))

@@ -98,7 +98,7 @@ class ExecutionModel:
 class Tau95Parts:
     """What tau95 is made of, as ``bigcbf calibrate`` measured it (informational; the stack uses tau95_s)."""
 
-    latency_s: float = 0.0              # command-to-wheel dead time (largest over the axes of tau95) [s]
+    latency_s: float = 0.0              # command-to-wheel latency (largest over the axes of tau95) [s]
     actuation_median_s: float = 0.0     # median half-way response delay of the clean command steps [s]
     actuation95_s: float = 0.0          # their 95th percentile [s]
     perception95_s: float = 0.0         # 95th percentile of the scan's age when a command is sent [s]
