@@ -6,8 +6,9 @@ The program is a sequence of ~35-s cycles (the last one cut at the requested dur
   0.8-1.2 s, back to rest in between), which give clean command edges for the delay distribution and the gains;
 - random combined steps: all three axes change together to random levels within the limits (||u_xy|| up to the
   translational limit, so some combinations reach the wheels' limit and saturate), held 0.8-1.2 s;
-- corner steps: 90 % of the ||u_xy|| limit on a diagonal and of the wz limit, nearly the largest wheel speeds the
-  stack can ask for (a wheel-speed limit below them is met), held 0.8-1.2 s;
+- corner steps: 90 % of the ||u_xy|| limit on a diagonal, with and without 90 % of the wz limit, nearly the
+  largest wheel speeds the stack can ask for (a wheel-speed limit below them is met, with two mixes of yaw and
+  translation, which tell the limit from its yaw lever arm), held 0.8-1.2 s;
 - ramps (triangles) of each axis to its limit and back;
 - a chirp sweep of each axis (0.2 -> 1.5 Hz), which exercises the response at frequencies where the delay
   matters.
@@ -71,11 +72,13 @@ def _random_combined(rng, lim, dt, n):
 
 def _corners(rng, lim, dt, n=2):
     """n segments near the corners of the command box: 90 % of the ||u_xy|| limit on a diagonal and of the wz limit
-    (random signs), and the mirror: nearly the largest wheel speeds the stack can ask for, so that a wheel-speed
-    limit is met (90 %: the simulated robot's own wheels top out at 1.275 m/s, just below the corner itself)."""
+    (random signs; every other one without yaw), and the mirror: nearly the largest wheel speeds the stack can ask
+    for, so that a wheel-speed limit is met, with and without yaw, which tells the limit from its yaw lever arm
+    (90 %: the simulated robot's own wheels top out at 1.275 m/s, just below the corner itself)."""
     out = []
-    for _ in range(n):
+    for i in range(n):
         sx, sy, sw = rng.choice([-1.0, 1.0], 3)
+        sw *= i % 2                    # every other one without yaw: two mixes of yaw and translation at the limit
         u = 0.9 * np.array([sx * lim[3] / np.sqrt(2), sy * lim[3] / np.sqrt(2), sw * lim[2]])
         u[0] = np.clip(u[0], -lim[0], lim[0])
         u[1] = np.clip(u[1], -lim[1], lim[1])

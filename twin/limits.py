@@ -114,7 +114,7 @@ class StaticFit:
     d: np.ndarray
     v_max: float | None                 # rim-speed limit [m/s] (None: not reached by the log)
     lever_m: float                      # yaw lever arm of the limit [m]
-    lever_range_m: tuple[float, float]  # levers within 2 % of the best error (wide: not identified) [m]
+    lever_range_m: tuple[float, float]  # levers within 4 noise variances of the best error (wide: not identified) [m]
     lever_identified: bool
     demand_max: float                   # the largest rim demand max|R (A u + d)| of the settled samples [m/s]
     n_saturated: int                    # settled samples beyond the limit
@@ -168,12 +168,15 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
         cands = []
         for i, k in enumerate(levers):
             D = rim_demand(p, k)
-            vm = np.unique(np.quantile(D, np.linspace(0.3, 1.0, opt.speed_steps)))
-            ratio = np.minimum(1.0, vm[:, None] / np.maximum(D[None, :], 1e-12))       # (G, n)
-            c = cost(p[None, :, :] * ratio[:, :, None])                                # (G,)
-            g = int(np.argmin(c))
-            prof[i] = c[g]
-            cands.append((float(vm[g]), float(k), float(c[g])))
+            grid = np.unique(np.quantile(D, np.linspace(0.3, 1.0, opt.speed_steps)))
+            for _ in range(2):                      # the quantile grid, then 41 values between its neighbours
+                ratio = np.minimum(1.0, grid[:, None] / np.maximum(D[None, :], 1e-12))  # (G, n)
+                c = cost(p[None, :, :] * ratio[:, :, None])                             # (G,)
+                g = int(np.argmin(c))
+                vm_best, c_best = float(grid[g]), float(c[g])
+                grid = np.linspace(grid[max(g - 1, 0)], grid[min(g + 1, len(grid) - 1)], 41)
+            prof[i] = c_best
+            cands.append((vm_best, float(k), c_best))
         vm, k, c = cands[int(np.argmin(prof))]
         # A, d from the samples clearly below the limit: near the kink a small error in the limit or the lever
         # would count saturated samples as linear ones and pull the gains down
@@ -201,7 +204,8 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
     noise = cost_sat / max(len(u), 1)
     reached = (vm is not None and n_sat >= max(opt.min_saturated, opt.min_saturated_fraction * len(u))
                and e_sat_b <= (1 - opt.improvement) * e_lin_b and cost_lin - cost_sat > 30 * noise)
-    near = levers[prof <= 1.02 * np.min(prof)] if np.isfinite(prof).any() else levers
+    # levers whose error is within 4 noise variances (the error per sample) of the best: an interval of about 2 sigma
+    near = levers[prof <= np.min(prof) * (1 + 4.0 / max(len(u), 1))] if np.isfinite(prof).any() else levers
     lever_range = (float(near.min()), float(near.max()))
     lever_ok = lever_id and reached and (lever_range[1] - lever_range[0]) <= 0.25 * opt.lever_max_m
     if not reached:
