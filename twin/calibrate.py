@@ -393,7 +393,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     if sat.any() and cov_all < bound.coverage - opt.coverage_warn:
         warnings.append(f"on every held-out sample, saturated ones included, the bound covers {cov_all:.3f}: "
                         "Eq. (1) does not describe the robot above its wheel limit")
-    cond = input_condition(u[~held & settled], axes)
+    cond = input_condition(u0[~held & settled], axes)          # the commands as sent: collinear or not
     if cond > opt.condition_warn:
         warnings.append(f"the commanded axes {', '.join(a for a, x in zip(AXES, axes) if x)} move together "
                         f"(condition number {cond:.0f}): each is excited, but their cross gains in A cannot be "

@@ -31,7 +31,9 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    box-averaged over each step and the prediction interpolated to the odometry times, so that the fit moves
    smoothly with L) for a batch of candidates at once: a common dead time L and lag T without acceleration limit;
    then a_max (geometric grid, and none) with L and T around that; then finer; then L per axis. An acceleration
-   limit is reported when it lowers the error by ``accel_gain`` against none. The per-axis dead times get a 5-95 %
+   limit is reported when it lowers the error by ``accel_gain`` against none. The yaw lever is then chosen among
+   those the static part leaves plausible (within 25 noise variances of its best), by the transients: how fast a
+   combined step ramps depends on it. The per-axis dead times get a 5-95 %
    interval by bootstrap over the calibration blocks (the error of each candidate summed per block).
 
 The dead time L is the command-to-wheel latency (what the robot profile's latency_s is in the simulator); T and the
@@ -72,9 +74,11 @@ def rim_matrix(lever_m: float) -> np.ndarray:
     return np.array([[1.0, -1.0, -k], [1.0, 1.0, k], [1.0, 1.0, -k], [1.0, -1.0, k]])
 
 
-def rim_demand(p: np.ndarray, lever_m: float) -> np.ndarray:
-    """max |R p| per row of p (n, 3): the fastest wheel's rim speed."""
-    return np.max(np.abs(np.asarray(p, float) @ rim_matrix(lever_m).T), axis=-1)
+def rim_demand(p: np.ndarray, lever_m) -> np.ndarray:
+    """max |R p| per row of p (n, 3): the fastest wheel's rim speed. The four wheels are the four sign combinations
+    of vx +- vy +- k wz, so (k >= 0) max|R p| = |vx| + |vy| + k |wz|; ``lever_m`` may be one value per row."""
+    p = np.asarray(p, float)
+    return np.abs(p[..., 0]) + np.abs(p[..., 1]) + np.asarray(lever_m, float) * np.abs(p[..., 2])
 
 
 def saturate(p: np.ndarray, v_max: float | None, lever_m: float) -> np.ndarray:
@@ -122,6 +126,30 @@ class StaticFit:
     cost_saturating: float              # error of this model
     A_linear: np.ndarray                # the linear fit across the limit (what a linear model would claim)
     d_linear: np.ndarray
+    lever_grid: np.ndarray = field(default_factory=lambda: np.zeros(0))     # the levers tried [m]
+    v_max_by_lever: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the best limit at each [m/s]
+    cost_by_lever: np.ndarray = field(default_factory=lambda: np.zeros(0))   # and its error
+    n_samples: int = 0
+
+    def plausible_levers(self, sigmas: float = 5.0, most: int = 7) -> np.ndarray:
+        """Levers whose static error is within ``sigmas``^2 noise variances of the best (at most ``most``, evenly
+        spread): the candidates the dynamic fit chooses among (a ramp's rate depends on the lever too)."""
+        if self.v_max is None or len(self.cost_by_lever) == 0:
+            return np.array([self.lever_m])
+        c = self.cost_by_lever
+        ok = np.flatnonzero(np.isfinite(c) & (c <= np.nanmin(c) * (1 + sigmas ** 2 / max(self.n_samples, 1))))
+        if len(ok) > most:
+            ok = ok[np.linspace(0, len(ok) - 1, most).round().astype(int)]
+        return np.unique(np.r_[self.lever_grid[ok], self.lever_m])
+
+    def at_lever(self, k: float) -> "StaticFit":
+        """This fit with the lever k and the limit that goes with it (from the static profile)."""
+        import dataclasses
+        if self.v_max is None or len(self.lever_grid) == 0:
+            return self
+        i = int(np.argmin(np.abs(self.lever_grid - k)))
+        vm = self.v_max_by_lever[i] if abs(self.lever_grid[i] - k) < 1e-9 else self.v_max
+        return dataclasses.replace(self, lever_m=float(k), v_max=float(vm))
 
     def predict(self, u: np.ndarray) -> np.ndarray:
         """The settled response: sat(A u + d)."""
@@ -162,6 +190,7 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
     A, d = A_lin, d_lin
     best = (None, float(levers[0]), cost_lin)
     prof = np.full(len(levers), np.inf)
+    cands = [(None, float(k), np.inf) for k in levers]
     for _ in range(3):
         p = u @ A.T + d
         prof = np.full(len(levers), np.inf)
@@ -212,7 +241,9 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
         A, d = A_lin, d_lin
         vm, n_sat, cost_sat = None, 0, cost_lin
     return StaticFit(A, d, vm, float(k), lever_range, bool(lever_ok), float(rim_demand(u @ A.T + d, k).max())
-                     if len(u) else 0.0, n_sat, cost_lin, cost_sat, A_lin, d_lin)
+                     if len(u) else 0.0, n_sat, cost_lin, cost_sat, A_lin, d_lin, levers,
+                     np.array([np.nan if c[0] is None else c[0] for c in cands]) if reached else np.zeros(0),
+                     np.array([c[2] for c in cands]) if reached else np.zeros(0), len(u))
 
 
 # --- the dynamic part ------------------------------------------------------------------------------------------
@@ -241,6 +272,8 @@ class Candidates:
     L: np.ndarray       # (C, 3) dead times per input axis [s]
     T: np.ndarray       # (C,) lags [s]
     a: np.ndarray       # (C,) acceleration limits [m/s^2 of rim] (inf: none)
+    k: np.ndarray | None = None      # (C,) yaw levers (None: the static fit's) [m]
+    v_max: np.ndarray | None = None  # (C,) rim-speed limits that go with them [m/s]
 
     @staticmethod
     def grid(L, T, a) -> "Candidates":
@@ -289,8 +322,9 @@ class DynamicProblem:
         prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3))."""
         C = len(cand)
         st = self.static
-        R = rim_matrix(st.lever_m)
         A, d = st.A, st.d
+        kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
+        vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
         # command box averages per unique delay and axis
         cols = []
         for j in range(3):
@@ -307,7 +341,7 @@ class DynamicProblem:
         targ = np.zeros((C, len(self.ts), 3)) if keep else None
         inp = np.zeros((C, len(self.ts), 3)) if keep else None
         wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
-        lim = st.v_max
+        has_lim = np.isfinite(vmc).any()
         has_a = np.isfinite(cand.a).any()
         u = np.empty((C, 3))
         K = int(round(self.avg_s / self.h))            # the odometry's average: trapezoid over the last K steps
@@ -319,12 +353,14 @@ class DynamicProblem:
                 table, inv = cols[j]
                 u[:, j] = table[n, inv]
             p = u @ A.T + d
-            if lim is not None:
-                D = np.max(np.abs(p @ R.T), axis=1)
-                p *= np.minimum(1.0, lim / np.maximum(D, 1e-12))[:, None]
+            if has_lim:
+                ap = np.abs(p)
+                D = ap[:, 0] + ap[:, 1] + kc * ap[:, 2]
+                p *= np.minimum(1.0, vmc / np.maximum(D, 1e-12))[:, None]
             if has_a:
                 step = p - x
-                rim = np.max(np.abs(step @ R.T), axis=1, keepdims=True)
+                ast = np.abs(step)
+                rim = (ast[:, 0] + ast[:, 1] + kc * ast[:, 2])[:, None]
                 x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
             else:
                 x = p
@@ -361,6 +397,7 @@ class DynamicFit:
     cost: float
     cost_no_accel: float
     notes: list[str] = field(default_factory=list)
+    lever_m: float | None = None        # the yaw lever the transients chose among the plausible static ones
 
     def candidate(self) -> Candidates:
         L = np.where(np.isfinite(self.latency_s), self.latency_s, np.nanmax(self.latency_s))
@@ -407,6 +444,21 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     if np.isfinite(a0) and cost_none <= (1 + opt.accel_gain) * best_cost:
         j = int(np.flatnonzero(none)[np.argmin(tot[none])])
         L0, T0, a0, best_cost = float(c3.L[j, 0]), float(c3.T[j]), np.inf, cost_none
+    # 3b. the yaw lever among those the static limit allows (a combined step's ramp depends on it)
+    lever = None
+    levers = prob.static.plausible_levers()
+    if len(levers) > 1:
+        vms = np.array([prob.static.at_lever(k).v_max for k in levers])
+        La = np.clip(L0 + np.array([-0.01, -0.005, 0.0, 0.005, 0.01]), 0.0, opt.max_delay_s)
+        aa = a0 * np.array([0.9, 0.95, 1.0, 1.05, 1.1]) if np.isfinite(a0) else np.array([np.inf])
+        iL, ia, ik = np.meshgrid(np.arange(len(La)), np.arange(len(aa)), np.arange(len(levers)), indexing="ij")
+        c3b = Candidates(np.repeat(La[iL.ravel()][:, None], 3, axis=1), np.full(iL.size, T0), aa[ia.ravel()],
+                         levers[ik.ravel()], vms[ik.ravel()])
+        i, tot3b = _best(prob.simulate(c3b), axes)
+        L0, a0, lever = float(c3b.L[i, 0]), float(c3b.a[i]), float(c3b.k[i])
+        best_cost = float(tot3b[i])
+        prob = DynamicProblem(prob.t_cmd, prob.u_cmd, prob.ts, prob.vs, prob.use, prob.block, prob.axes,
+                              prob.static.at_lever(lever), prob.h, prob.avg_s)
     # 4. dead time per axis, bootstrap over blocks
     rng = np.random.default_rng(seed)
     offs = np.arange(-0.05, 0.0501, 0.005)
@@ -438,7 +490,7 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     if np.isfinite(a0) and a0 >= opt.accel_max:      # at the top of the grid: no limit the log can show
         a0 = np.inf
     floor = float(opt.accel_max) if not np.isfinite(a0) else float(a0)
-    return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes)
+    return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes, lever)
 
 
 @dataclass
@@ -472,25 +524,62 @@ def settled_by_model(y: np.ndarray, target: np.ndarray, axes: np.ndarray,
     return np.all(ok[:, np.asarray(axes, bool)], axis=1)
 
 
+def steady_samples(t: np.ndarray, v: np.ndarray, axes: np.ndarray, window_s: float = 0.3,
+                   tol: tuple[float, float, float] = (0.02, 0.02, 0.04), rel: float = 0.03) -> np.ndarray:
+    """True where the *measured* twist has stopped changing: on every identified axis the mean over the last half
+    of a trailing ``window_s`` differs from the mean over its first half by at most max(tol_j, 4 noise standard
+    errors) + rel |v_j| (the noise from the median absolute first difference). A model can call a sample settled
+    because it believes the robot reached a limit it has not; the measurement cannot."""
+    t, v = np.asarray(t, float), np.asarray(v, float)
+    n = len(t)
+    out = np.ones(n, bool)
+    i_mid = np.searchsorted(t, t - window_s / 2, side="left")
+    i_start = np.searchsorted(t, t - window_s, side="left")
+    for j in np.flatnonzero(axes):
+        c = np.r_[0.0, np.cumsum(v[:, j])]
+        n_a = np.arange(n) + 1 - i_mid
+        n_b = i_mid - i_start
+        ok = (n_a >= 2) & (n_b >= 2)
+        a = (c[np.arange(n) + 1] - c[i_mid]) / np.maximum(n_a, 1)
+        b = (c[i_mid] - c[i_start]) / np.maximum(n_b, 1)
+        sigma = 1.4826 * np.median(np.abs(np.diff(v[:, j]))) / np.sqrt(2) if n > 2 else 0.0
+        lim = np.maximum(tol[j], 4 * sigma * np.sqrt(1 / np.maximum(n_a, 1) + 1 / np.maximum(n_b, 1))) + rel * np.abs(a)
+        out &= ok & (np.abs(a - b) <= lim)
+    return out
+
+
 def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_init: np.ndarray,
               settled_init: np.ndarray, opt: LimitOptions = LimitOptions(), min_settled: int = 100,
-              avg_s: float = 0.0) -> SaturatingModel:
-    """Steps 1-2 of the module docstring, twice: the static part on the settled samples of the calibration blocks
+              avg_s: float = 0.0, rounds: int = 3) -> SaturatingModel:
+    """Steps 1-2 of the module docstring, iterated: the static part on the settled samples of the calibration blocks
     (``cal``; at first those of ``settled_init``, with the commands ``u_init``), the dynamic part on every sample of
-    the calibration blocks; then the static part again on the samples the model says have settled (with the
-    commands delayed by its dead times) and the dynamic part refined."""
+    the calibration blocks; then, up to ``rounds`` times until the static part stops changing, the static part again
+    on the samples the model says have settled (and, where the model saturates, whose measured twist has stopped
+    changing: :func:`steady_samples`), with the commands delayed by the dead times, and the dynamic part refined."""
     axes = np.asarray(axes, bool)
+    steady_meas = steady_samples(t, v, axes)
     st = fit_static(u_init[cal & settled_init], v[cal & settled_init], axes, opt)
-    prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s, avg_s)
-    dyn = fit_dynamic(prob, opt)
-    y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
-    settled = settled_by_model(y, s, axes) & scored
-    use = cal & settled
-    if use.sum() >= min_settled:
-        st = fit_static(u[use], v[use], axes, opt)
+    dyn = None
+    for r in range(rounds + 1):
         prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s, avg_s)
-        a = np.inf if dyn.accel_max is None else dyn.accel_max
-        dyn = fit_dynamic(prob, opt, start=(float(np.nanmedian(dyn.latency_s)), dyn.lag_s, a))
+        if dyn is None:
+            dyn = fit_dynamic(prob, opt)
+        else:
+            a = np.inf if dyn.accel_max is None else dyn.accel_max
+            dyn = fit_dynamic(prob, opt, start=(float(np.nanmedian(dyn.latency_s)), dyn.lag_s, a))
+        if dyn.lever_m is not None:
+            st = st.at_lever(dyn.lever_m)
         y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
-        settled = settled_by_model(y, s, axes) & scored
+        # where the model has its target saturated, the measurement must agree that the robot stopped changing
+        settled = settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
+        use = cal & settled
+        if r == rounds or use.sum() < min_settled:
+            break
+        new = fit_static(u[use], v[use], axes, opt)
+        same = ((new.v_max is None) == (st.v_max is None)
+                and (new.v_max is None or abs(new.v_max / st.v_max - 1) < 0.01)
+                and np.allclose(new.A, st.A, atol=0.005))
+        st = new
+        if same and r >= 1:
+            break
     return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored)

@@ -16,7 +16,7 @@ Models compared, always the first two:
   time L0, and the robot profile that reproduces the log is latency = L - L0 (the median over the identified
   axes), gain G = A0^-1 A, bias b = A0^-1 (d - d0) (measured = A0 (G u + b) + d0 = A u + d), the wheel-speed limit
   v_max / a0 (a0: A0's mean translational gain, the limit acts before it) with the log's yaw lever, and the log's
-  acceleration limit when it is below the model's own. A, d (and the limits) come from ``--profile`` (an
+  acceleration limit when it is clearly (20 %) below the model's own. A, d (and the limits) come from ``--profile`` (an
   uncertainty profile) or from calibrating the log itself; the dead time is always measured on the replayed log
   (an uncertainty profile holds tau95, which includes perception latency);
 - fitted (``--fit``): starting from the calibrated profile, latency, the diagonal gains and the floor friction
@@ -220,7 +220,7 @@ def model_profile(A, d, delay_s: float, A0, d0, delay0_s: float, v_max: float | 
                   accel0: float | None = None) -> RobotProfile:
     """The robot profile that makes the model respond like the log: latency = delay - delay0, G = A0^-1 A,
     b = A0^-1 (d - d0), wheel-speed limit v_max / a0 (a0 = A0's mean translational gain), the log's yaw lever, and
-    its acceleration limit when below the model's own ``accel0`` (module docstring)."""
+    its acceleration limit when clearly (20 %) below the model's own ``accel0`` (module docstring)."""
     A0 = np.asarray(A0, float)
     A0inv = np.linalg.inv(A0)
     G = A0inv @ np.asarray(A, float)
@@ -230,7 +230,8 @@ def model_profile(A, d, delay_s: float, A0, d0, delay0_s: float, v_max: float | 
                         gain=tuple(tuple(float(x) for x in row) for row in G), bias=tuple(float(x) for x in b),
                         wheel_speed_max_mps=None if v_max is None else float(v_max) / a0,
                         wheel_yaw_lever_m=None if v_max is None or lever_m is None or lever_m <= 0 else float(lever_m),
-                        wheel_accel_max_mps2=float(accel) if accel is not None and (accel0 is None or accel < accel0)
+                        wheel_accel_max_mps2=float(accel) if accel is not None and (accel0 is None
+                                                                                      or accel < 0.8 * accel0)
                         else None)
 
 
@@ -288,7 +289,7 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     try:
         cal = calibrate_series(dataclasses.replace(raw, scan=None), cal_opt)
         delay_s = _median_latency(cal)
-        notes += cal.notes()
+        notes += [n for n in cal.notes() if not n.startswith("no scans given")]     # replay leaves scans out
     except UserError as err:
         notes += list(data.warnings) + tb_notes
         if execution is None:
