@@ -494,9 +494,11 @@ def summary_lines(cal: Calibration) -> list[str]:
         f"{AXES[j]} {a.delay_s:.3f} s [{a.ci_s[0]:.3f}, {a.ci_s[1]:.3f}]" + (" NEAR TIE" if a.tie else "")
         for j, a in d.axes.items()) + f"; all axes {d.xcorr_s:.3f} s")
     p = cal.tau95_parts()
-    lines.append(f"tau95          {d.tau95_s:.3f} s = 95 % of (actuation + perception): actuation on "
-                 f"{', '.join(AXES[j] for j in d.tau95_axes)} from {len(d.edge_delays_s)} edges (latency "
-                 f"{p.latency_s:.3f} s, half-way median {d.actuation_median_s:.3f} s, p95 {d.actuation95_s:.3f} s); "
+    act = (f"actuation on {', '.join(AXES[j] for j in d.tau95_axes)} from {len(d.edge_delays_s)} edges (latency "
+           f"{p.latency_s:.3f} s, half-way median {d.actuation_median_s:.3f} s, p95 {d.actuation95_s:.3f} s)"
+           if len(d.edge_delays_s) >= DelayOptions().min_edges else
+           f"actuation = the cross-correlation delay {d.xcorr_s:.3f} s (too few clean edges; latency {p.latency_s:.3f} s)")
+    lines.append(f"tau95          {d.tau95_s:.3f} s = 95 % of (actuation + perception): {act}; "
                  f"perception p95 {d.perception95_s:.3f} s from {d.perception_source}")
     if cal.model is not None:
         st, dyn = cal.model.static, cal.model.dynamic

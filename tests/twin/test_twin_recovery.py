@@ -52,8 +52,10 @@ def test_gains_and_bias_recovered(cals, profile):
     gains = np.diag(np.asarray(profile.gain))
     assert cal.fit.identified.all() and cal.counts["saturated"] < 0.05 * cal.counts["aligned"]
     np.testing.assert_allclose(np.diag(cal.fit.A), gains, rtol=0.05)                     # the 5 %
-    # relative to the model's own gains the profile's come out within 2 %
-    np.testing.assert_allclose(np.diag(cal.fit.A) / np.diag(ideal.fit.A), gains, rtol=0.02)
+    # relative to the model's own gains the translational ones come out within 2 %. Not yaw: the drive's fast corner
+    # steps (diagonal at 0.72 m/s with 0.9 rad/s) make the model's own rollers slip in yaw (its yaw gain reads
+    # ~0.93 on the ideal robot, less slip at the profile's slower yaw), so the ratio is no measure there
+    np.testing.assert_allclose((np.diag(cal.fit.A) / np.diag(ideal.fit.A))[:2], gains[:2], rtol=0.02)
     np.testing.assert_allclose(cal.fit.d, profile.bias, atol=0.02)
     assert abs(cal.fit.d[0] - 0.02) < 0.005
 
