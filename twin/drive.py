@@ -8,7 +8,8 @@ The program is a sequence of ~35-s cycles (the last one cut at the requested dur
   translational limit, so some combinations reach the wheels' limit and saturate), held 0.8-1.2 s;
 - corner steps: 90 % of the ||u_xy|| limit on a diagonal, with and without 90 % of the wz limit, nearly the
   largest wheel speeds the stack can ask for (a wheel-speed limit below them is met, with two mixes of yaw and
-  translation, which tell the limit from its yaw lever arm), held 0.8-1.2 s;
+  translation, which tell the limit from its yaw lever arm), held 2-2.5 s and followed by 1 s at rest (long enough
+  for a robot whose wheels accelerate at 0.8 m/s^2 to reach its limit and stay there);
 - ramps (triangles) of each axis to its limit and back;
 - a chirp sweep of each axis (0.2 -> 1.5 Hz), which exercises the response at frequencies where the delay
   matters.
@@ -82,8 +83,12 @@ def _corners(rng, lim, dt, n=2):
         u = 0.9 * np.array([sx * lim[3] / np.sqrt(2), sy * lim[3] / np.sqrt(2), sw * lim[2]])
         u[0] = np.clip(u[0], -lim[0], lim[0])
         u[1] = np.clip(u[1], -lim[1], lim[1])
-        hold = rng.uniform(0.8, 1.2)
-        out.append([np.tile(sign * u, (int(round(hold / dt)), 1)) for sign in (1, -1)])
+        hold = rng.uniform(2.0, 2.5)
+        seg = []
+        for sign in (1, -1):
+            seg.append(np.tile(sign * u, (int(round(hold / dt)), 1)))
+            seg.append(np.zeros((int(round(1.0 / dt)), 3)))
+        out.append(seg)
     return out
 
 
