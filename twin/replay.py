@@ -18,7 +18,10 @@ Models compared, always the first two:
   v_max / a0 (a0: A0's mean translational gain, the limit acts before it) with the log's yaw lever, and the log's
   acceleration limit when it is clearly (20 %) below the model's own. A, d (and the limits) come from ``--profile`` (an
   uncertainty profile) or from calibrating the log itself; the dead time is always measured on the replayed log
-  (an uncertainty profile holds tau95, which includes perception latency);
+  (an uncertainty profile holds tau95, which includes perception latency). Then one correction step: the latency
+  is moved by the lag that best aligns the replayed twist with the logged one (the correlation of their changes:
+  both answer the same commands, so their shapes match, where the model's own response does not simply add to
+  the log's: a lag, a latency jitter or an acceleration ramp trade against the dead time differently on each side);
 - fitted (``--fit``): starting from the calibrated profile, latency, the diagonal gains and the floor friction
   are tuned to minimise the replay's velocity error (Nelder-Mead on the first ``fit_window_s`` of the log).
 
@@ -265,6 +268,32 @@ def why_worse(j: int, cal, nominal: ReplayRun, calibrated: ReplayRun) -> str:
     return "; ".join(reasons)
 
 
+def response_shift(run: ReplayRun, odom: OdomSeries, axes, max_s: float = 0.3, grid_s: float = 0.005) -> float:
+    """The time [s] by which the replayed twist leads the logged one: the lag in [-max_s, max_s] maximising the
+    correlation of their changes on a common grid (summed over ``axes``), parabola-refined; 0 without changes."""
+    from .delay import _refine
+    t0, t1 = max(run.t[0], odom.t[0]), min(run.t[-1], odom.t[-1])
+    if t1 - t0 < 20 * grid_s:
+        return 0.0
+    tg = np.arange(t0, t1, grid_s)
+    n = int(round(max_s / grid_s))
+    lags = np.arange(-n, n + 1)
+    curve = np.zeros(len(lags))
+    for j in np.flatnonzero(axes):
+        a = np.diff(np.interp(tg, run.t, run.twist[:, j]))
+        b = np.diff(np.interp(tg, odom.t, odom.twist[:, j]))
+        na, nb = np.sqrt(a @ a), np.sqrt(b @ b)
+        if na == 0 or nb == 0:
+            continue
+        full = np.correlate(b, a, mode="full") / (na * nb)        # index len(a) - 1 is lag 0
+        mid = len(a) - 1
+        curve += full[mid - n:mid + n + 1]
+    if not np.any(curve):
+        return 0.0
+    k = int(np.argmax(curve))
+    return float((_refine(curve, k) - n) * grid_s)
+
+
 def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOptions = ReplayOptions(),
            video: str | Path | None = None, cal_opt: CalibrationOptions = CalibrationOptions()) -> ReplayResult:
     """Replay with the nominal and the calibrated (and, with opt.fit, the fitted) profiles; optional video."""
@@ -322,7 +351,16 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     else:
         A0, d0, L0, own_accel = np.eye(3), np.zeros(3), 0.0, None
     prof = model_profile(A, d, delay_s, A0, d0, L0, v_max, lever, accel, own_accel)
-    runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    first = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    # one correction step: the lag that best aligns the replayed twist with the logged one (correlation of their
+    # changes; both are responses to the same commands, so their shapes match), added to the latency
+    ident = cal.fit.identified if cal is not None else np.ones(3, bool)
+    shift = response_shift(first, data.odom, ident)
+    if abs(shift) > 0.002:
+        prof = dataclasses.replace(prof, latency_s=max(0.0, prof.latency_s + shift))
+        runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    else:
+        runs["calibrated"] = first
     if opt.fit:
         runs["fitted"] = fit_profile(data, prof, opt, scene, P)
     identified = cal.fit.identified if cal is not None else np.array(
