@@ -73,3 +73,40 @@ def test_low_floor_friction_makes_the_robot_slip():
     ideal = _response(RobotProfile(), until=0.5)
     icy = _response(RobotProfile(floor_friction=0.05), until=0.5)
     assert icy[-1, 1] < 0.8 * ideal[-1, 1]
+
+
+def test_wheel_limiter_saturates_all_wheels_together_by_hand():
+    from bigcbf.sim.firmware import WheelLimiter, rim_matrix
+    # lever 0.1645 m: the twist (0.6, 0, 1.0) asks rim speeds (0.4355, 0.7645, 0.4355, 0.7645) m/s; a 0.4 m/s
+    # limit scales the whole twist by 0.4 / 0.7645 (direction kept)
+    lim = WheelLimiter(RobotProfile(wheel_speed_max_mps=0.4), 0.1645)
+    np.testing.assert_allclose(np.abs(rim_matrix(0.1645) @ [0.6, 0.0, 1.0]), [0.4355, 0.7645, 0.4355, 0.7645])
+    np.testing.assert_allclose(lim.saturate([0.6, 0.0, 1.0]), np.array([0.6, 0.0, 1.0]) * 0.4 / 0.7645)
+    np.testing.assert_allclose(lim.saturate([0.3, 0.05, 0.2]), [0.3, 0.05, 0.2])        # within the limit
+    # a differential drive's geometry (half track 0.08 m): pure spin 6 rad/s asks 0.48 m/s -> 5 rad/s at 0.4
+    dd = WheelLimiter(RobotProfile(wheel_speed_max_mps=0.4, wheel_yaw_lever_m=0.08), 0.1645)
+    np.testing.assert_allclose(dd.saturate([0.0, 0.0, 6.0]), [0.0, 0.0, 5.0])
+
+
+def test_wheel_limiter_acceleration_by_hand():
+    from bigcbf.sim.firmware import WheelLimiter
+    # 2 m/s^2 on the rim, updates every 10 ms from rest toward vx = 1 m/s (rim 1 m/s on every wheel): 0.02 m/s
+    # per update, 0.2 m/s after 0.1 s; toward (0.5, 0, 1.0) the fastest wheel (0.6645 m/s) leads: the twist
+    # moves 0.02 / 0.6645 of the way per update
+    lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=2.0), 0.1645)
+    for k in range(11):
+        out = lim.update(0.01 * k, [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(out, [0.2, 0.0, 0.0], atol=1e-12)
+    lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=2.0), 0.1645)
+    lim.update(0.0, [0.5, 0.0, 1.0])
+    np.testing.assert_allclose(lim.update(0.01, [0.5, 0.0, 1.0]), np.array([0.5, 0.0, 1.0]) * 0.02 / 0.6645)
+
+
+def test_default_profile_has_no_limiter_and_limits_show_in_the_physics():
+    assert ImperfectionLayer(RobotProfile(), np.random.default_rng(0)).limiter is None
+    world = SimWorld(SceneSpec(), profile=RobotProfile(wheel_speed_max_mps=0.3))
+    for k in range(60):
+        if k % 5 == 0:
+            world.command((0.8, 0.0, 0.0))
+        world.step(5)
+    assert world.odom().vx == pytest.approx(0.3 * 0.991, abs=0.01)      # the model's effective vx scale 0.991

@@ -1,14 +1,20 @@
 """The perception-to-actuation delay tau95 of Eq. (15), from a log of commands, odometry and (optionally) scans.
 
-Three measurements, all on log (receive) times; header stamps are used only when they are on the log's clock:
+Three measurements, all on the log's clock (the odometry on the time base of twin.timebase); scan header stamps
+are used only when they are on the log's clock:
 
 1. actuation delay by cross-correlation: commands (held between messages) and measured body velocity are put on
    a common grid; the delay is the lag that maximises the correlation of their *changes* (first differences,
    each axis normalised, summed over the excited axes), refined to below the grid step by a parabola through
-   the peak. Correlating changes, not levels, gives a sharp peak at the dead time.
+   the peak. Correlating changes, not levels, gives a sharp peak at the dead time. The same per axis
+   (:class:`AxisDelay`), with a confidence interval by bootstrap over segments (the log cut into ``block_s``
+   blocks, the blocks resampled with replacement ``bootstrap`` times, the peak found again each time: the 5-95 %
+   range), and a warning when a second peak, at least ``tie_separation_s`` away, reaches ``tie_ratio`` of the
+   highest (two candidate delays nearly tie: the log cannot tell them apart).
 2. per-edge actuation delays (the distribution): at each clean command step on an axis (the command held before
    and after), the time from the command to the measured response crossing half-way between its settled
-   levels before and after (and staying past it for two samples, so that a noise spike is not a crossing). For a dead time L followed by a first-order lag T this is L + T ln 2.
+   levels before and after (and staying past it for two samples, so that a noise spike is not a crossing). For a
+   dead time L followed by a first-order lag T this is L + T ln 2.
 3. perception latency per command: the age of the newest scan at the time the command was sent (the command can
    only be based on that scan): t_cmd - t_acq. t_acq is the scan's log time unless its header stamps are on the
    log's clock: ``scan_clock`` "auto" takes the stamps when the median of (log time - stamp) lies in
@@ -16,7 +22,10 @@ Three measurements, all on log (receive) times; header stamps are used only when
    on another clock), "stamps" and "log" force one or the other. The offset found is reported in the notes.
 
 tau95 is the 95th percentile of (actuation delay + perception latency), the two taken as independent: every
-per-edge delay is paired with every latency.
+per-edge delay is paired with every latency. The actuation delays are those of the translational axes (vx, vy)
+when they have at least ``min_edges`` clean edges: Eq. (15) multiplies tau95 by a translational relative velocity,
+and a slower yaw response (a filtered gyro, a yaw-rate ramp) is not a delay of the robot's translation; otherwise
+those of every identified axis.
 """
 from __future__ import annotations
 
@@ -42,6 +51,28 @@ class DelayOptions:
     min_edges: int = 5               # fewer clean edges: the distribution is the cross-correlation delay alone
     scan_clock: str = "auto"         # scan acquisition times: "auto", "stamps" (header stamps) or "log" (log times)
     max_stamp_offset_s: float = 0.3  # "auto": stamps this much older than their log times are still the log's clock [s]
+    block_s: float = 10.0            # bootstrap segments [s] (at least 6 segments)
+    bootstrap: int = 400             # bootstrap resamples [-]
+    tie_ratio: float = 0.95          # a second peak this high (of the highest) nearly ties [-]
+    tie_separation_s: float = 0.04   # ... if at least this far from the highest [s]
+
+
+@dataclass
+class AxisDelay:
+    """The cross-correlation delay of one axis (method 1 of the module docstring) and its confidence."""
+    axis: int
+    delay_s: float                   # the peak, parabola-refined [s]
+    ci_s: tuple[float, float]        # 5-95 % of the bootstrap over segments [s]
+    peak: float                      # the correlation at the peak [-]
+    runner_up_s: float = float("nan")   # a second peak that nearly ties (nan: none) [s]
+    runner_up_peak: float = float("nan")
+    edges: int = 0                   # clean edges on this axis
+    edge_median_s: float = float("nan")  # their median half-way delay [s]
+    curve: np.ndarray | None = None      # the correlation curve over the lags (for the report)
+
+    @property
+    def tie(self) -> bool:
+        return bool(np.isfinite(self.runner_up_s))
 
 
 @dataclass
@@ -59,7 +90,8 @@ class DelayEstimate:
     perception95_s: float
     tau95_s: float
     notes: list[str] = field(default_factory=list)
-
+    axes: dict[int, AxisDelay] = field(default_factory=dict)    # per identified axis
+    tau95_axes: tuple[int, ...] = ()                             # the axes whose edges make tau95
 
 def grid_signals(t_cmd, u_cmd, t_odom, v_odom, grid_s: float, max_gap_s: float):
     """Commands (zero-order hold) and measured velocity (interpolated) on a common grid over their overlap.
@@ -195,15 +227,96 @@ def tau95(actuation_s, perception_s, q: float = 0.95) -> float:
     return quantile_upper((a[:, None] + p[None, :]).ravel(), q)
 
 
+def _refine(curve: np.ndarray, k: int) -> float:
+    """Sub-grid peak position (in grid steps) by a parabola through k and its neighbours."""
+    if 0 < k < len(curve) - 1:
+        y0, y1, y2 = curve[k - 1], curve[k], curve[k + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            return k + float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5))
+    return float(k)
+
+
+def block_correlations(u_grid, v_grid, valid, j: int, grid_s: float, max_delay_s: float, block_s: float):
+    """Per-segment numerators of the change correlation of axis j: N (n_blocks, L) with sum over blocks = the
+    curve of :func:`xcorr_delay` for that axis times its norms. Returns (N, norm) or (None, 0) without changes."""
+    du = np.diff(u_grid[:, j])
+    dv = np.diff(v_grid[:, j])
+    ok = valid[1:] & valid[:-1]
+    a = np.where(ok, du, 0.0)
+    b = np.where(ok, dv, 0.0)
+    sa, sb = np.sqrt(np.sum(a * a)), np.sqrt(np.sum(b * b))
+    if sa == 0 or sb == 0:
+        return None, 0.0
+    n_lag = int(round(max_delay_s / grid_s))
+    n = len(a)
+    nb = max(6, int(round(n * grid_s / block_s)))
+    edges = np.linspace(0, n, nb + 1).round().astype(int)
+    bpad = np.concatenate([b, np.zeros(n_lag)])
+    N = np.array([np.correlate(bpad[e0:e1 + n_lag], a[e0:e1], mode="valid") for e0, e1 in zip(edges, edges[1:])])
+    return N, float(sa * sb)
+
+
+def ties(curve: np.ndarray, grid_s: float, ratio: float, separation_s: float) -> tuple[float, float]:
+    """A second local peak of ``curve`` at least ``separation_s`` from the highest and at least ``ratio`` of its
+    height: (its lag [s], its height), or (nan, nan)."""
+    k = int(np.argmax(curve))
+    top = curve[k]
+    if not top > 0:
+        return float("nan"), float("nan")
+    w = 3
+    pad = np.concatenate([np.full(w, -np.inf), curve, np.full(w, -np.inf)])
+    from numpy.lib.stride_tricks import sliding_window_view
+    local = curve >= sliding_window_view(pad, 2 * w + 1).max(axis=1)
+    far = np.abs(np.arange(len(curve)) - k) * grid_s >= separation_s
+    cand = np.flatnonzero(local & far & (curve >= ratio * top))
+    if len(cand) == 0:
+        return float("nan"), float("nan")
+    c = int(cand[np.argmax(curve[cand])])
+    return _refine(curve, c) * grid_s, float(curve[c])
+
+
+def axis_delays(u_grid, v_grid, valid, axes, opt: "DelayOptions", seed: int = 0) -> dict[int, AxisDelay]:
+    """Method 1 per axis, with the bootstrap confidence interval and the near-tie check (module docstring)."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for j in axes:
+        N, norm = block_correlations(u_grid, v_grid, valid, j, opt.grid_s, opt.max_delay_s, opt.block_s)
+        if N is None:
+            continue
+        curve = N.sum(axis=0) / norm
+        k = int(np.argmax(curve))
+        W = rng.multinomial(len(N), np.full(len(N), 1.0 / len(N)), size=opt.bootstrap).astype(float)
+        boot = W @ N
+        kb = np.argmax(boot, axis=1)
+        d_boot = np.array([_refine(boot[i], kb[i]) for i in range(len(kb))]) * opt.grid_s
+        lo, hi = np.quantile(d_boot, [0.05, 0.95])
+        r_s, r_p = ties(curve, opt.grid_s, opt.tie_ratio, opt.tie_separation_s)
+        out[int(j)] = AxisDelay(int(j), _refine(curve, k) * opt.grid_s, (float(lo), float(hi)), float(curve[k]),
+                                r_s, r_p, curve=curve)
+    return out
+
+
 def estimate_delay(t_cmd, u_cmd, t_odom, v_odom, axes, t_scan=None, stamp_scan=None,
                    opt: DelayOptions = DelayOptions()) -> DelayEstimate:
     """All of the module docstring: cross-correlation, per-edge delays, perception latency, tau95."""
     notes: list[str] = []
     tg, ug, vg, ok = grid_signals(t_cmd, u_cmd, t_odom, v_odom, opt.grid_s, opt.max_gap_s)
     d_xc, lags, curve = xcorr_delay(ug, vg, ok, axes, opt.grid_s, opt.max_delay_s)
+    per_axis = axis_delays(ug, vg, ok, axes, opt)
     d_edge, t_edge, a_edge = edge_delays(t_cmd, u_cmd, t_odom, v_odom, axes, opt)
-    if len(d_edge) >= opt.min_edges:
-        actuation = d_edge
+    for j, ad in per_axis.items():
+        ad.edges = int(np.sum(a_edge == j))
+        ad.edge_median_s = float(np.median(d_edge[a_edge == j])) if ad.edges else float("nan")
+        if ad.tie:
+            notes.append(f"two candidate delays nearly tie on {AXES[j]}: {ad.delay_s:.3f} s (correlation "
+                         f"{ad.peak:.3f}) and {ad.runner_up_s:.3f} s ({ad.runner_up_peak:.3f}); the log cannot tell "
+                         f"them apart (bootstrap 5-95 %: {ad.ci_s[0]:.3f}-{ad.ci_s[1]:.3f} s)")
+    trans = [j for j in axes if j in (0, 1)]
+    use_axes = trans if trans and int(np.isin(a_edge, trans).sum()) >= opt.min_edges else list(axes)
+    d_use = d_edge[np.isin(a_edge, use_axes)] if len(d_edge) else d_edge
+    if len(d_use) >= opt.min_edges:
+        actuation = d_use
     else:
         actuation = np.array([d_xc])
         notes.append(f"only {len(d_edge)} clean command steps (a step held {opt.edge_hold_s} s before and after, "
@@ -219,10 +332,11 @@ def estimate_delay(t_cmd, u_cmd, t_odom, v_odom, axes, t_scan=None, stamp_scan=N
                      + (", so the acquisition-to-log latency is not counted)" if source == "log times" else ")"))
     else:
         lat, source = np.zeros(0), "no scans"
-        notes.append("no scans in the log: tau95 holds the actuation delay only")
+        notes.append("no scans given: tau95 holds the actuation delay only")
     return DelayEstimate(
         xcorr_s=d_xc, xcorr_lags_s=lags, xcorr_curve=curve, edge_delays_s=d_edge, edge_times_s=t_edge,
         edge_axes=a_edge, perception_latency_s=lat, perception_source=source,
         actuation_median_s=float(np.median(actuation)), actuation95_s=quantile_upper(actuation, opt.quantile),
         perception95_s=quantile_upper(lat, opt.quantile) if len(lat) else 0.0,
-        tau95_s=tau95(actuation, lat, opt.quantile), notes=notes)
+        tau95_s=tau95(actuation, lat, opt.quantile), notes=notes, axes=per_axis,
+        tau95_axes=tuple(int(j) for j in use_axes) if len(d_use) >= opt.min_edges else tuple(int(j) for j in axes))

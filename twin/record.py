@@ -7,7 +7,13 @@ hardware until a user brings their own log. The log is ROS 2 MCAP with the robot
     /cmd_vel 20 Hz, /odom 50 Hz (wheel odometry), /imu 50 Hz, /tf 50 Hz, /ground_truth/odom 50 Hz, /scan 10 Hz
 
 Log time = simulation time; the command at time t is sent after the sensors of time t are logged (as a robot
-whose controller runs on fresh data).
+whose controller runs on fresh data). The program runs closed loop (:class:`twin.drive.CalibrationDrive`: back to
+the start between segments when the odometry says the robot has wandered), so that it stays in its room for any
+robot profile within the documented ranges (``bigcbf.params.robot``).
+
+The log is written to a temporary file beside ``out`` and renamed to ``out`` only when the drive is complete: a
+drive that fails (it leaves the room's free space, the simulation breaks, Ctrl-C) leaves no complete-looking log
+behind; the failure is a :class:`~bigcbf.errors.UserError` (one line on the command line).
 
 The odometry twist is the average over the odometry period (the pose change from the previous message, in the
 body frame at mid-heading, divided by the period), as a robot's driver computes it from encoder counts; the
@@ -16,17 +22,19 @@ yaw rate at rest), which no encoder-based odometry reports.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from bigcbf.errors import UserError
 from bigcbf.logio import LogWriter
 from bigcbf.params.robot import RobotProfile
 from bigcbf.params.toml_io import to_dict
 from bigcbf.types import RobotState
 
-from .drive import DriveLimits, calibration_program
+from .drive import CalibrationDrive, DriveLimits
 
 TICK_S = 0.01
 CMD_EVERY, ODOM_EVERY, SCAN_EVERY = 5, 2, 10        # in ticks: 20 Hz, 50 Hz, 10 Hz
@@ -35,12 +43,15 @@ ROOM_EXTENT_M = 4.0
 
 def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, duration_s: float = 60.0,
                        limits: DriveLimits = DriveLimits()) -> dict:
-    """Drive the calibration program on a robot with ``profile``; write the log to ``out``. Returns a summary
-    (messages per topic, duration, the largest distance from the start)."""
+    """Drive the calibration program on a robot with ``profile``; write the log to ``out`` (module docstring).
+    Returns a summary (messages per topic, duration, the largest distance from the start, the re-centrings)."""
     from bigcbf.sim.scene import open_room
     from bigcbf.sim.world import SimWorld
 
-    t_cmd, u_cmd = calibration_program(duration_s, limits, seed)
+    out = Path(out)
+    if out.is_dir():
+        raise UserError("is a directory, expected an .mcap file path", file=str(out))
+    drive = CalibrationDrive(duration_s, limits, seed, dt=CMD_EVERY * TICK_S)
     world = SimWorld(open_room(extent=ROOM_EXTENT_M), profile=profile, seed=seed)
     steps = int(round(TICK_S / world.dt))
     n_ticks = int(round(duration_s / TICK_S))
@@ -48,32 +59,55 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
             "robot_profile": repr(to_dict(profile)), "limits": repr(asdict(limits))}
     reach = 0.0
     prev: RobotState | None = None
-    with LogWriter(out, metadata=meta) as w:
-        for k in range(n_ticks):
-            t = world.t
-            if k % ODOM_EVERY == 0:
-                odom, truth = world.odom(), world.true_state()
-                if prev is not None:
-                    odom = averaged_twist(prev, odom, ODOM_EVERY * TICK_S)
-                prev = odom
-                w.odom(t, odom)
-                w.tf(t, odom)
-                w.ground_truth(t, truth)
-                w.imu(t, world.imu())
-                reach = max(reach, float(np.hypot(truth.px, truth.py)))
-                if reach > ROOM_EXTENT_M - 0.6:
-                    raise RuntimeError(f"the calibration drive left the room's free space (|p| = {reach:.2f} m)")
-            if k % SCAN_EVERY == 0:
-                w.scan(t, world.scan())
-            if k % CMD_EVERY == 0:
-                i = k // CMD_EVERY
-                if i < len(u_cmd):
-                    world.command(u_cmd[i])
-                    w.cmd_vel(t, u_cmd[i])
-            world.step(steps)
-        counts = dict(w.counts)
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    try:
+        with LogWriter(tmp, metadata=meta) as w:
+            for k in range(n_ticks):
+                t = world.t
+                if k % ODOM_EVERY == 0:
+                    odom, truth = world.odom(), world.true_state()
+                    if prev is not None:
+                        odom = averaged_twist(prev, odom, ODOM_EVERY * TICK_S)
+                    prev = odom
+                    w.odom(t, odom)
+                    w.tf(t, odom)
+                    w.ground_truth(t, truth)
+                    w.imu(t, world.imu())
+                    reach = max(reach, float(np.hypot(truth.px, truth.py)))
+                    if reach > ROOM_EXTENT_M - 0.6 or not np.isfinite(reach):
+                        raise UserError(f"the calibration drive left the room's free space at t = {t:.1f} s "
+                                        f"(|p| = {reach:.2f} m, seed {seed}); no log written: is the robot profile "
+                                        "within the documented ranges (bigcbf/params/robot.py)?", file=str(out))
+                if k % SCAN_EVERY == 0:
+                    w.scan(t, world.scan())
+                if k % CMD_EVERY == 0:
+                    o = world.odom()
+                    u = drive.command(t, (o.px, o.py, o.theta))
+                    world.command(u)
+                    w.cmd_vel(t, u)
+                world.step(steps)
+            counts = dict(w.counts)
+        os.replace(tmp, out)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return {"path": str(out), "duration_s": duration_s, "messages": counts, "max_distance_m": reach,
-            "warnings": world.warnings()}
+            "recentrings": drive.recentrings, "warnings": world.warnings()}
+
+
+def random_profile(rng: np.random.Generator) -> RobotProfile:
+    """A random robot profile with wheel limits, inside the documented ranges of bigcbf/params/robot.py, for
+    recovery checks (tests/twin/test_twin_recovery.py, scripts/twin_recovery.py): latency U(0, 0.25) s, jitter
+    U(0, 0.04) s, diagonal gains U(0.75, 1.15), bias U(+-0.04) m/s and U(+-0.08) rad/s, residual U(0, 0.04), wheel
+    rim-speed limit U(0.35, 0.9) m/s, wheel acceleration limit log-uniform in [0.8, 8] m/s^2."""
+    gains = rng.uniform(0.75, 1.15, 3)
+    return RobotProfile(
+        latency_s=float(rng.uniform(0.0, 0.25)), latency_jitter_s=float(rng.uniform(0.0, 0.04)),
+        gain=tuple(tuple(float(gains[i]) if i == j else 0.0 for j in range(3)) for i in range(3)),
+        bias=(float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.04, 0.04)), float(rng.uniform(-0.08, 0.08))),
+        residual_max=tuple(float(x) for x in rng.uniform(0.0, 0.04, 3)),
+        wheel_speed_max_mps=float(rng.uniform(0.35, 0.9)),
+        wheel_accel_max_mps2=float(np.exp(rng.uniform(np.log(0.8), np.log(8.0)))))
 
 
 def averaged_twist(prev: RobotState, cur: RobotState, dt: float) -> RobotState:

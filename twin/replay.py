@@ -1,25 +1,35 @@
 """Replay logged commands through the MuJoCo model and compare with the logged odometry (``bigcbf replay``).
 
-The model starts at rest at the logged pose at the first command and receives every logged command at its log
-time (relative to that start). At each logged odometry time the simulated wheel odometry is sampled; its twist is
-the average over the interval since the previous sample (pose change in the body frame / interval), as an
-encoder-based odometry reports it, so both sides are measured the same way.
+The log is read as calibrate reads it (twin.timebase: the odometry on its best time base, its own twist). The model
+starts at rest at the logged pose at the first command and receives every logged command at its log time (relative
+to that start). At each logged odometry time the simulated wheel odometry is sampled; its twist is the average over
+the log's nominal odometry period before that time (the pose change over that period in the body frame), as an
+encoder-based odometry reports it, so both sides are measured alike, and bursts of messages (several within a
+millisecond) cannot turn into meaningless velocities.
 
-Models compared:
+Models compared, always the first two:
 
-- nominal: the ideal robot (``RobotProfile()``: no latency, A = I, d = 0);
-- calibrated: the log's execution model and actuation delay, mapped onto the model's own response. The model is
-  not ideal either (wheel dynamics, roller slip, the odometry's averaging), so the nominal replay is calibrated
-  too, giving its own A0, d0 and delay0, and the robot profile that reproduces the log is
-  latency = delay - delay0, gain G = A0^-1 A, bias b = A0^-1 (d - d0) (measured = A0 (G u + b) + d0 = A u + d).
-  A, d come from ``--profile`` (an uncertainty profile) or from calibrating the log itself; the delay is always
-  measured on the replayed log (an uncertainty profile holds tau95, which includes perception latency);
+- nominal: the ideal robot (``RobotProfile()``: no latency, A = I, d = 0, no wheel limits);
+- calibrated: the log's saturating execution model (twin.limits: A, d, the dead time, the wheel-speed and
+  acceleration limits) mapped onto the model's own response. The model is not ideal either (wheel dynamics,
+  roller slip, the odometry's averaging), so the nominal replay is calibrated too, giving its own A0, d0 and dead
+  time L0, and the robot profile that reproduces the log is latency = L - L0 (the median over the identified
+  axes), gain G = A0^-1 A, bias b = A0^-1 (d - d0) (measured = A0 (G u + b) + d0 = A u + d), the wheel-speed limit
+  v_max / a0 (a0: A0's mean translational gain, the limit acts before it) with the log's yaw lever, and the log's
+  acceleration limit when it is clearly (20 %) below the model's own. A, d (and the limits) come from ``--profile`` (an
+  uncertainty profile) or from calibrating the log itself; the dead time is always measured on the replayed log
+  (an uncertainty profile holds tau95, which includes perception latency). Then one correction step: the latency
+  is moved by the lag that best aligns the replayed twist with the logged one (the correlation of their changes:
+  both answer the same commands, so their shapes match, where the model's own response does not simply add to
+  the log's: a lag, a latency jitter or an acceleration ramp trade against the dead time differently on each side);
 - fitted (``--fit``): starting from the calibrated profile, latency, the diagonal gains and the floor friction
   are tuned to minimise the replay's velocity error (Nelder-Mead on the first ``fit_window_s`` of the log).
 
 Errors: velocity RMSE per axis over all samples; pose drift over consecutive windows of ``window_s``: the
 displacement over the window in the frame of its start, simulated minus logged (m), and the heading change
-difference (rad); the final position error.
+difference (rad); the final position error. The result carries every note calibrate has about the log, and a
+warning for each identified axis on which the calibrated replay is worse than the nominal one, with what the
+calibration says about why.
 """
 from __future__ import annotations
 
@@ -37,6 +47,7 @@ from bigcbf.params.stack import ExecutionModel
 
 from .calibrate import CalibrationOptions, calibrate_series
 from .execution import AXES
+from .timebase import prepare
 
 
 @dataclass(frozen=True)
@@ -64,8 +75,10 @@ class ReplayRun:
     final_error_m: float = float("nan")
 
     def to_json(self) -> dict:
-        return {"profile": {"latency_s": self.profile.latency_s, "gain": [list(r) for r in self.profile.gain],
-                            "bias": list(self.profile.bias), "floor_friction": self.profile.floor_friction},
+        p = self.profile
+        return {"profile": {"latency_s": p.latency_s, "gain": [list(r) for r in p.gain], "bias": list(p.bias),
+                            "floor_friction": p.floor_friction, "wheel_speed_max_mps": p.wheel_speed_max_mps,
+                            "wheel_yaw_lever_m": p.wheel_yaw_lever_m, "wheel_accel_max_mps2": p.wheel_accel_max_mps2},
                 "velocity_rmse": dict(zip(AXES, map(float, self.rmse))),
                 "drift_mean_m": self.drift_mean_m, "drift_max_m": self.drift_max_m,
                 "yaw_drift_mean_rad": self.yaw_drift_mean_rad, "yaw_drift_max_rad": self.yaw_drift_max_rad,
@@ -78,11 +91,23 @@ class ReplayResult:
     window_s: float
     runs: dict[str, ReplayRun]
     notes: list[str] = field(default_factory=list)
+    identified: np.ndarray | None = None      # the axes the calibration identified (the comparison's axes)
+
+    @property
+    def worse_axes(self) -> list[str]:
+        """Identified axes on which the calibrated replay is worse than the nominal one."""
+        if "calibrated" not in self.runs or self.identified is None:
+            return []
+        c, n = self.runs["calibrated"].rmse, self.runs["nominal"].rmse
+        return [AXES[j] for j in np.flatnonzero(self.identified) if c[j] > n[j]]
 
     def to_json(self) -> dict:
         from .calibrate import jsonable
         return jsonable({"log": self.log, "window_s": self.window_s,
-                         "runs": {k: r.to_json() for k, r in self.runs.items()}, "notes": self.notes})
+                         "runs": {k: r.to_json() for k, r in self.runs.items()},
+                         "identified": None if self.identified is None else
+                         {a: bool(x) for a, x in zip(AXES, self.identified)},
+                         "calibrated_worse_on": self.worse_axes, "notes": self.notes})
 
 
 # --- simulation ----------------------------------------------------------------------------------------------
@@ -101,10 +126,12 @@ def scene_for(pose_xy: np.ndarray):
 
 
 def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: RobotProfile, t_end: float | None = None,
-             scene=None, frame: Callable | None = None, fps: float = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             scene=None, frame: Callable | None = None, fps: float = 10.0,
+             period_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Replay commands (log times cmd_t, twists cmd_u) from the logged odometry pose at the first command.
 
-    Returns (t, pose (N, 3), twist (N, 3)) at the logged odometry times after the start (up to ``t_end``).
+    Returns (t, pose (N, 3), twist (N, 3)) at the logged odometry times after the start (up to ``t_end``); the
+    twist is the average over ``period_s`` before each time (default: the median odometry interval).
     ``frame(world, t_log)`` is called every 1/fps s of simulated time (for a video)."""
     from bigcbf.sim.world import SimWorld
 
@@ -114,6 +141,9 @@ def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: Ro
     ts = odom.t[sel]
     if len(ts) < 2:
         raise ValueError("fewer than two odometry messages after the first command")
+    if period_s is None:
+        dt = np.diff(odom.t)
+        period_s = float(np.median(dt[dt > 0])) if np.any(dt > 0) else 0.02
     k0 = max(int(np.searchsorted(odom.t, t0, side="right")) - 1, 0)
     x0, y0, th0 = odom.pose[k0]
     world = SimWorld(scene if scene is not None else scene_for(odom.pose[:, :2]), profile=profile, seed=0)
@@ -121,12 +151,13 @@ def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: Ro
     dt = world.dt
     events = [(float(t), 0, i) for i, t in enumerate(cmd_t) if t <= t_stop]
     events += [(float(t), 1, i) for i, t in enumerate(ts)]
+    events += [(float(t) - period_s, 3, i) for i, t in enumerate(ts) if t - period_s > t0]
     if frame is not None:
         events += [(float(t), 2, 0) for t in np.arange(t0, t_stop, 1.0 / fps)]
     events.sort()
     pose = np.zeros((len(ts), 3))
+    before = np.full((len(ts), 3), np.nan)
     twist = np.zeros((len(ts), 3))
-    prev = None
     for te, kind, i in events:
         n = int(round((te - t0 - world.t) / dt))
         if n > 0:
@@ -136,16 +167,19 @@ def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: Ro
         elif kind == 1:
             s = world.odom()
             pose[i] = (s.px, s.py, s.theta)
-            if prev is None:
-                twist[i] = (s.vx, s.vy, s.wz)
+            if np.isnan(before[i, 0]):              # the first period after the start: at rest before it
+                before[i] = odom.pose[k0]
+                h = te - t0
             else:
-                h = te - prev[0]
-                dth = float(_wrap(s.theta - prev[3]))
-                mid = prev[3] + 0.5 * dth
-                c, sn = np.cos(mid), np.sin(mid)
-                dx, dy = s.px - prev[1], s.py - prev[2]
-                twist[i] = ((c * dx + sn * dy) / h, (-sn * dx + c * dy) / h, dth / h) if h > 0 else twist[i - 1]
-            prev = (te, s.px, s.py, s.theta)
+                h = period_s
+            dth = float(_wrap(s.theta - before[i, 2]))
+            mid = before[i, 2] + 0.5 * dth
+            c, sn = np.cos(mid), np.sin(mid)
+            dx, dy = s.px - before[i, 0], s.py - before[i, 1]
+            twist[i] = ((c * dx + sn * dy) / h, (-sn * dx + c * dy) / h, dth / h) if h > 0 else (s.vx, s.vy, s.wz)
+        elif kind == 3:
+            s = world.odom()
+            before[i] = (s.px, s.py, s.theta)
         else:
             frame(world, te)
     return ts, pose, twist
@@ -178,20 +212,86 @@ def errors(run: ReplayRun, odom: OdomSeries, window_s: float) -> ReplayRun:
 
 
 def run_profile(name: str, data: LogData, profile: RobotProfile, window_s: float, t_end=None, scene=None,
-                frame=None, fps: float = 10.0) -> ReplayRun:
-    t, pose, twist = simulate(data.cmd.t, data.cmd.u, data.odom, profile, t_end, scene, frame, fps)
+                frame=None, fps: float = 10.0, period_s: float | None = None) -> ReplayRun:
+    t, pose, twist = simulate(data.cmd.t, data.cmd.u, data.odom, profile, t_end, scene, frame, fps, period_s)
     return errors(ReplayRun(name, profile, t, pose, twist), data.odom, window_s)
 
 
 # --- the calibrated model --------------------------------------------------------------------------------------
-def model_profile(A, d, delay_s: float, A0, d0, delay0_s: float) -> RobotProfile:
+def model_profile(A, d, delay_s: float, A0, d0, delay0_s: float, v_max: float | None = None,
+                  lever_m: float | None = None, accel: float | None = None,
+                  accel0: float | None = None) -> RobotProfile:
     """The robot profile that makes the model respond like the log: latency = delay - delay0, G = A0^-1 A,
-    b = A0^-1 (d - d0) (module docstring)."""
-    A0inv = np.linalg.inv(np.asarray(A0, float))
+    b = A0^-1 (d - d0), wheel-speed limit v_max / a0 (a0 = A0's mean translational gain), the log's yaw lever, and
+    its acceleration limit when clearly (20 %) below the model's own ``accel0`` (module docstring)."""
+    A0 = np.asarray(A0, float)
+    A0inv = np.linalg.inv(A0)
     G = A0inv @ np.asarray(A, float)
     b = A0inv @ (np.asarray(d, float) - np.asarray(d0, float))
+    a0 = float(np.mean(np.diag(A0)[:2]))
     return RobotProfile(latency_s=max(0.0, float(delay_s - delay0_s)),
-                        gain=tuple(tuple(float(x) for x in row) for row in G), bias=tuple(float(x) for x in b))
+                        gain=tuple(tuple(float(x) for x in row) for row in G), bias=tuple(float(x) for x in b),
+                        wheel_speed_max_mps=None if v_max is None else float(v_max) / a0,
+                        wheel_yaw_lever_m=None if v_max is None or lever_m is None or lever_m <= 0 else float(lever_m),
+                        wheel_accel_max_mps2=float(accel) if accel is not None and (accel0 is None
+                                                                                      or accel < 0.8 * accel0)
+                        else None)
+
+
+def _median_latency(cal) -> float:
+    lat = cal.latency_s[cal.fit.identified]
+    lat = lat[np.isfinite(lat)]
+    return float(np.median(lat)) if len(lat) else float(cal.delay.xcorr_s)
+
+
+def why_worse(j: int, cal, nominal: ReplayRun, calibrated: ReplayRun) -> str:
+    """What the calibration says about why the calibrated replay is worse on axis j (best guesses, measured)."""
+    reasons = []
+    if cal is None:
+        return "the log could not be calibrated (see the notes)"
+    dyn = cal.model.dynamic if cal.model is not None else None
+    ra = cal.rmse_all
+    if ra and ra["saturating"][j] >= ra["nominal"][j]:
+        reasons.append(f"even open loop the calibrated model does not predict {AXES[j]} better than v = u "
+                       f"({ra['saturating'][j]:.3f} vs {ra['nominal'][j]:.3f}): the log's {AXES[j]} does not follow "
+                       "its command as Eq. (1) and a wheel limit describe")
+    elif ra:
+        reasons.append(f"open loop the calibrated model predicts {AXES[j]} better ({ra['saturating'][j]:.3f} vs "
+                       f"nominal {ra['nominal'][j]:.3f}); replayed through the MuJoCo model it does not: the "
+                       "simulated robot's own dynamics (Mecanum rollers, its wheel response"
+                       + (f"; the log's robot adds a {dyn.lag_s * 1e3:.0f} ms lag the simulator has no key for"
+                          if dyn is not None and dyn.lag_s > 0.05 else "") + ") differ from this robot's")
+    if dyn is not None and np.isfinite(dyn.latency_ci_s[j]).all() and np.ptp(dyn.latency_ci_s[j]) > 0.05:
+        reasons.append(f"its dead time is uncertain ({dyn.latency_ci_s[j, 0]:.3f}-{dyn.latency_ci_s[j, 1]:.3f} s)")
+    if j in cal.delay.axes and cal.delay.axes[j].tie:
+        reasons.append("two candidate delays nearly tie")
+    return "; ".join(reasons)
+
+
+def response_shift(run: ReplayRun, odom: OdomSeries, axes, max_s: float = 0.3, grid_s: float = 0.005) -> float:
+    """The time [s] by which the replayed twist leads the logged one: the lag in [-max_s, max_s] maximising the
+    correlation of their changes on a common grid (summed over ``axes``), parabola-refined; 0 without changes."""
+    from .delay import _refine
+    t0, t1 = max(run.t[0], odom.t[0]), min(run.t[-1], odom.t[-1])
+    if t1 - t0 < 20 * grid_s:
+        return 0.0
+    tg = np.arange(t0, t1, grid_s)
+    n = int(round(max_s / grid_s))
+    lags = np.arange(-n, n + 1)
+    curve = np.zeros(len(lags))
+    for j in np.flatnonzero(axes):
+        a = np.diff(np.interp(tg, run.t, run.twist[:, j]))
+        b = np.diff(np.interp(tg, odom.t, odom.twist[:, j]))
+        na, nb = np.sqrt(a @ a), np.sqrt(b @ b)
+        if na == 0 or nb == 0:
+            continue
+        full = np.correlate(b, a, mode="full") / (na * nb)        # index len(a) - 1 is lag 0
+        mid = len(a) - 1
+        curve += full[mid - n:mid + n + 1]
+    if not np.any(curve):
+        return 0.0
+    k = int(np.argmax(curve))
+    return float((_refine(curve, k) - n) * grid_s)
 
 
 def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOptions = ReplayOptions(),
@@ -199,47 +299,92 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     """Replay with the nominal and the calibrated (and, with opt.fit, the fitted) profiles; optional video."""
     if data.cmd is None or data.odom is None:
         raise UserError("replay needs commands and odometry", file=str(data.path))
+    notes: list[str] = []
+    raw = data
+    data, timing, tb_notes = prepare(data, cal_opt.timebase)
     if np.sum(data.odom.t >= data.cmd.t[0]) < 2:
         raise UserError(f"no odometry ({data.odom.topic}) after the first command ({data.cmd.topic}) to compare with",
                         file=str(data.path))
-    notes: list[str] = []
     k0 = max(int(np.searchsorted(data.odom.t, data.cmd.t[0], side="right")) - 1, 0)
     if np.linalg.norm(data.odom.twist[k0, :2]) > 0.05:
         notes.append("the robot was moving at the first command; the replay starts it at rest")
     scene = scene_for(data.odom.pose[:, :2])
-    nominal = run_profile("nominal", data, RobotProfile(), opt.window_s, scene=scene)
-    # the log's own model (with a given profile only its delay is needed, so a log too weak to calibrate still
+    P = timing.period_s
+    nominal = run_profile("nominal", data, RobotProfile(), opt.window_s, scene=scene, period_s=P)
+    runs = {"nominal": nominal}
+    # the log's own model (with a given profile only its dead time is needed, so a log too weak to calibrate still
     # replays), and the nominal model's response to the same commands
+    cal = None
     try:
-        cal = calibrate_series(dataclasses.replace(data, scan=None), cal_opt)
-        delay_s = cal.delay.xcorr_s
+        cal = calibrate_series(dataclasses.replace(raw, scan=None), cal_opt)
+        delay_s = _median_latency(cal)
+        notes += [n for n in cal.notes() if not n.startswith("no scans given")]     # replay leaves scans out
     except UserError as err:
+        notes += list(data.warnings) + tb_notes
         if execution is None:
-            raise
+            notes.append(f"no calibrated replay: the log could not be calibrated ({err.message})")
+            return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes), None)
         from .delay import estimate_delay
         axes = [j for j in range(3) if np.ptp(data.cmd.u[:, j]) > 1e-9] or [0]
         delay_s = estimate_delay(data.cmd.t, data.cmd.u, data.odom.t, data.odom.twist, axes, opt=cal_opt.delay).xcorr_s
         notes.append(f"the log could not be calibrated ({err.message}); only its actuation delay was measured")
-    sim_log = dataclasses.replace(data, scan=None, odom=OdomSeries("replay", nominal.t, nominal.t, nominal.pose,
-                                                                   nominal.twist))
-    cal0 = calibrate_series(sim_log, cal_opt)
+    sim_log = dataclasses.replace(data, scan=None, warnings=[],
+                                  odom=OdomSeries("replay", nominal.t, nominal.t, nominal.pose, nominal.twist))
+    try:
+        cal0 = calibrate_series(sim_log, cal_opt)
+    except UserError as err:           # the model's own response could not be measured: take it as ideal
+        cal0 = None
+        notes.append(f"the nominal replay could not be calibrated ({err.message}); the model's own response is "
+                     "taken as ideal (A0 = I, no dead time)")
+    v_max = lever = accel = None
     if execution is None:
         A, d = cal.fit.A, cal.fit.d
+        st, dyn = cal.model.static, cal.model.dynamic
+        v_max, lever, accel = st.v_max, st.lever_m, dyn.accel_max
     else:
         A, d = np.asarray(execution.A, float), np.asarray(execution.d, float)
-        notes.append("execution model A, d from the given profile; actuation delay measured on this log")
-    prof = model_profile(A, d, delay_s, cal0.fit.A, cal0.fit.d, cal0.delay.xcorr_s)
-    runs = {"nominal": nominal}
-    runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene)
+        v_max, lever, accel = execution.wheel_speed_max_mps, execution.wheel_yaw_lever_m, execution.wheel_accel_max_mps2
+        notes.append("execution model A, d" + (" and wheel limits" if v_max is not None or accel is not None else "")
+                     + " from the given profile; dead time measured on this log")
+    if cal0 is not None:
+        A0, d0, L0, own_accel = cal0.fit.A, cal0.fit.d, _median_latency(cal0), cal0.model.dynamic.accel_max
+    else:
+        A0, d0, L0, own_accel = np.eye(3), np.zeros(3), 0.0, None
+    prof = model_profile(A, d, delay_s, A0, d0, L0, v_max, lever, accel, own_accel)
+    first = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    # one correction step: the lag that best aligns the replayed twist with the logged one (correlation of their
+    # changes; both are responses to the same commands, so their shapes match), added to the latency
+    ident = cal.fit.identified if cal is not None else np.ones(3, bool)
+    shift = response_shift(first, data.odom, ident)
+    if abs(shift) > 0.002:
+        prof = dataclasses.replace(prof, latency_s=max(0.0, prof.latency_s + shift))
+        runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    else:
+        runs["calibrated"] = first
     if opt.fit:
-        runs["fitted"] = fit_profile(data, prof, opt, scene)
+        runs["fitted"] = fit_profile(data, prof, opt, scene, P)
+    identified = cal.fit.identified if cal is not None else np.array(
+        execution.identified if execution is not None else (True, True, True))
+    for j in np.flatnonzero(identified):
+        c, n = runs["calibrated"].rmse[j], nominal.rmse[j]
+        if c > n:
+            notes.append(f"WORSE: the calibrated replay tracks {AXES[j]} worse than the nominal one ({c:.4f} vs "
+                         f"{n:.4f} {('m/s', 'm/s', 'rad/s')[j]}): {why_worse(j, cal, nominal, runs['calibrated'])}")
     if video is not None:
         best = runs.get("fitted", runs["calibrated"])
         write_video(data, best, runs["nominal"], video, opt, scene)
-    return ReplayResult(str(data.path), opt.window_s, runs, notes)
+    return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes), identified)
 
 
-def fit_profile(data: LogData, start: RobotProfile, opt: ReplayOptions, scene) -> ReplayRun:
+def _dedup(notes: list[str]) -> list[str]:
+    out = []
+    for n in notes:
+        if n not in out:
+            out.append(n)
+    return out
+
+
+def fit_profile(data: LogData, start: RobotProfile, opt: ReplayOptions, scene, period_s=None) -> ReplayRun:
     """Tune latency, the diagonal gains and the floor friction to the log (Nelder-Mead, opt.fit_evals replays
     of the first opt.fit_window_s), then replay the whole log with the result."""
     from scipy.optimize import minimize
@@ -259,12 +404,12 @@ def fit_profile(data: LogData, start: RobotProfile, opt: ReplayOptions, scene) -
                                    floor_friction=float(x[4]))
 
     def cost(x):
-        r = run_profile("fit", data, profile_of(x), opt.window_s, t_end=t_end, scene=scene)
+        r = run_profile("fit", data, profile_of(x), opt.window_s, t_end=t_end, scene=scene, period_s=period_s)
         return float(np.sum(r.rmse / scale))
 
     simplex = np.vstack([x0, x0 + np.diag([0.05, -0.1, -0.1, -0.1, 0.3])])
     res = minimize(cost, x0, method="Nelder-Mead", options={"maxfev": opt.fit_evals, "initial_simplex": simplex})
-    return run_profile("fitted", data, profile_of(res.x), opt.window_s, scene=scene)
+    return run_profile("fitted", data, profile_of(res.x), opt.window_s, scene=scene, period_s=period_s)
 
 
 def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | Path, opt: ReplayOptions, scene) -> None:

@@ -13,7 +13,8 @@ def add_arguments(p):
     p.add_argument("what", choices=["calibration"], help="what to record (calibration: the calibration drive)")
     p.add_argument("--robot-profile", type=path_arg, required=True, metavar="PROFILE.toml",
                    help="the robot's imperfections (latency_s, latency_jitter_s, gain, bias, residual_max, "
-                        "residual_hold_s, floor_friction); an empty file is the ideal robot")
+                        "residual_hold_s, floor_friction, wheel_speed_max_mps, wheel_accel_max_mps2, "
+                        "wheel_yaw_lever_m); an empty file is the ideal robot")
     p.add_argument("--out", type=path_arg, required=True, metavar="PATH.mcap", help="the log to write")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the drive program and of the imperfections")
     p.add_argument("--duration", type=positive_float, default=120.0, metavar="S",
@@ -43,5 +44,6 @@ def run(args) -> int:
     else:
         n = sum(summary["messages"].values())
         print(f"wrote {args.out}: {args.duration:g} s calibration drive, {n} messages "
-              f"({', '.join(f'{k} {v}' for k, v in summary['messages'].items())})")
+              f"({', '.join(f'{k} {v}' for k, v in summary['messages'].items())}); back to the start "
+              f"{summary['recentrings']} times, at most {summary['max_distance_m']:.2f} m from it")
     return 0

@@ -35,8 +35,11 @@ def run(args) -> int:
 
     res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit), video=args.video,
                      cmd_topic=args.cmd_topic, odom_topic=args.odom_topic)
-    best = res.runs.get("fitted", res.runs["calibrated"])
+    best = res.runs.get("fitted", res.runs.get("calibrated"))
     if args.save_robot_profile is not None:
+        if best is None:
+            raise UserError("no calibrated model to save: the log could not be calibrated (see the notes with "
+                            "--json)", file=str(args.log))
         save(best.profile, args.save_robot_profile,
              header=f"Simulator robot profile ({best.name}) that replays {args.log}; from `bigcbf replay`.")
     if args.json:
@@ -46,13 +49,30 @@ def run(args) -> int:
           f"windows, simulated odometry vs logged")
     print(f"{'model':<11} {'rmse vx':>8} {'rmse vy':>8} {'rmse wz':>8} {'drift mean':>11} {'drift max':>10} "
           f"{'yaw mean':>9} {'final err':>10}")
-    for name, r in res.runs.items():
+    for name in ("nominal", "calibrated", "fitted"):
+        r = res.runs.get(name)
+        if r is None:
+            if name == "calibrated":
+                print(f"{name:<11} {'n/a':>8}   (the log could not be calibrated: see the notes)")
+            continue
         print(f"{name:<11} {r.rmse[0]:8.4f} {r.rmse[1]:8.4f} {r.rmse[2]:8.4f} {r.drift_mean_m:10.3f}m "
               f"{r.drift_max_m:9.3f}m {r.yaw_drift_mean_rad:8.3f}r {r.final_error_m:9.3f}m")
-    p = best.profile
-    print(f"{best.name} profile: latency {p.latency_s:.3f} s, gain diag "
-          f"{', '.join(f'{p.gain[j][j]:.3f}' for j in range(3))}, bias {', '.join(f'{x:+.3f}' for x in p.bias)}"
-          + (f", floor friction {p.floor_friction:.3f}" if p.floor_friction is not None else ""))
+    if res.identified is not None:
+        print("identified axes: " + ", ".join(a for a, x in zip(("vx", "vy", "wz"), res.identified) if x)
+              + ("; calibrated worse than nominal on: " + ", ".join(res.worse_axes) if res.worse_axes else
+                 "; calibrated no worse than nominal on any of them"))
+    if best is not None:
+        p = best.profile
+        lim = []
+        if p.wheel_speed_max_mps is not None:
+            lim.append(f"wheel speed {p.wheel_speed_max_mps:.3f} m/s"
+                       + (f" (yaw lever {p.wheel_yaw_lever_m:.3f} m)" if p.wheel_yaw_lever_m is not None else ""))
+        if p.wheel_accel_max_mps2 is not None:
+            lim.append(f"wheel acceleration {p.wheel_accel_max_mps2:.2f} m/s^2")
+        print(f"{best.name} profile: latency {p.latency_s:.3f} s, gain diag "
+              f"{', '.join(f'{p.gain[j][j]:.3f}' for j in range(3))}, bias {', '.join(f'{x:+.3f}' for x in p.bias)}"
+              + (f", floor friction {p.floor_friction:.3f}" if p.floor_friction is not None else "")
+              + (", " + ", ".join(lim) if lim else ""))
     for n in res.notes:
         print(f"note: {n}")
     for path in (args.video, args.save_robot_profile):

@@ -11,6 +11,9 @@ A TOML robot profile (all keys optional; the defaults of the dataclasses are an 
     slip_max = 0.05                  # lateral slip: up to this fraction of ||u_xy||, across the motion [-]
     slip_hold_s = 0.5                # the slip fraction is redrawn every slip_hold_s (s)
     floor_friction = 0.35            # sliding friction of the floor; unset = the model's own
+    wheel_speed_max_mps = 0.6        # wheel rim-speed limit of the firmware (m/s); unset = no limit
+    wheel_accel_max_mps2 = 2.0       # wheel rim-acceleration limit of the firmware (m/s^2); unset = no limit
+    wheel_yaw_lever_m = 0.1645       # yaw lever arm of those limits (m); unset = the model's lx + ly
 
     [lidar]                          # the 2-D LiDAR (sensor_msgs/LaserScan)
     n_beams = 360                    # beams per revolution (angular resolution 2 pi / n_beams)
@@ -32,6 +35,18 @@ The executed body twist is ``A u + d + r + s`` (paper Eq. (1), with A extended t
 lateral slip, perpendicular to the commanded translation), applied ``latency`` after the command was issued; the
 wheels then realise it through the Mecanum inverse kinematics and the floor contact. Every random source draws
 from its own stream (``bigcbf.sim.world``), so that e.g. LiDAR noise does not change the execution residuals.
+Wheel limits, as a base's firmware has them (``bigcbf.sim.firmware.WheelLimiter``): the wheel rim speeds of the
+twist, ``vx -+ vy -+ k wz`` for the four wheels (k = ``wheel_yaw_lever_m``, by default half wheelbase + half
+track of the model), are scaled down *together* when the fastest exceeds ``wheel_speed_max_mps`` (the direction
+of motion is kept; the axes are coupled: a turn takes speed from a straight run), and the change of the wheel
+speeds per firmware tick (10 ms) is scaled down together so that no wheel accelerates faster than
+``wheel_accel_max_mps2``. ``wheel_yaw_lever_m`` lets the model imitate another base's geometry (a differential
+drive's half track, as ``bigcbf replay`` identifies it).
+
+Documented ranges (the calibration drive, ``bigcbf record calibration``, is checked on them): latency_s 0-0.3,
+latency_jitter_s 0-0.05, gain diagonal 0.7-1.2 with off-diagonal terms within +-0.1, bias within +-0.05 m/s
+(vx, vy) and +-0.1 rad/s (wz), residual_max up to 0.05, floor_friction 0.3-2, wheel_speed_max_mps 0.3-1.2,
+wheel_accel_max_mps2 0.5-10.
 
 The simulated X3 used by every scenario by default is ``bigcbf/profiles/x3_sim.toml`` (its comments give the
 source of every value); scenario files override its keys in a ``[robot_profile]`` table.
@@ -123,6 +138,9 @@ class RobotProfile:
     lidar: LidarModel = field(default_factory=LidarModel)
     odometry: OdometryModel = field(default_factory=OdometryModel)
     imu: ImuModel = field(default_factory=ImuModel)
+    wheel_speed_max_mps: float | None = None
+    wheel_accel_max_mps2: float | None = None
+    wheel_yaw_lever_m: float | None = None
 
     def __post_init__(self):
         if self.latency_s < 0 or self.latency_jitter_s < 0:
@@ -137,6 +155,15 @@ class RobotProfile:
             raise ValueError("slip_hold_s must be > 0")
         if self.floor_friction is not None and not (0 < self.floor_friction <= 5):
             raise ValueError("floor_friction must be in (0, 5]")
+        for name in ("wheel_speed_max_mps", "wheel_accel_max_mps2", "wheel_yaw_lever_m"):
+            v = getattr(self, name)
+            if v is not None and not (0 < v < 1e6):
+                raise ValueError(f"{name} must be > 0 (or left out: no limit)")
+
+    @property
+    def has_wheel_limits(self) -> bool:
+        """Whether the firmware limits the wheel speeds or accelerations."""
+        return self.wheel_speed_max_mps is not None or self.wheel_accel_max_mps2 is not None
 
     @property
     def is_ideal(self) -> bool:

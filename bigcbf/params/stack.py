@@ -18,6 +18,11 @@ simply a StackParams TOML holding only the ``[uncertainty]`` and ``[uncertainty.
     residual_horizon_s = 0.15
     residual_coverage = 0.95
 
+The calibration adds informational keys the stack does not use (it reads them back, and ``bigcbf replay --profile``
+uses the limits): ``wheel_speed_max_mps``, ``wheel_yaw_lever_m``, ``wheel_accel_max_mps2`` in
+``[uncertainty.execution]`` (the robot's wheel limits: Eq. (1) holds below them), and the table
+``[uncertainty.tau95_parts]`` (what tau95 is made of).
+
 Equation numbers follow issue 3 (see ``bigcbf/control/__init__.py`` for the mapping to the paper's labels).
 """
 from __future__ import annotations
@@ -31,7 +36,7 @@ from ..errors import FieldError
 from .robot import IDENTITY3, Mat3, Vec3
 from .toml_io import from_dict, load_toml, save, to_dict
 
-__all__ = ["ExecutionModel", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
+__all__ = ["ExecutionModel", "Tau95Parts", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
            "load_stack_params", "save_stack_params", "default_stack_params", "stack_profile_path", "read_provenance"]
 
 
@@ -70,6 +75,9 @@ class ExecutionModel:
     residual_horizon_s: float = 0.15                    # see the class docstring [s]
     residual_coverage: float = 0.95                     # stated coverage of the bound (informational) [-]
     identified: tuple[bool, bool, bool] = (True, True, True)  # axes the calibration identified (informational)
+    wheel_speed_max_mps: float | None = None            # the robot's wheel rim-speed limit (informational) [m/s]
+    wheel_yaw_lever_m: float | None = None              # its yaw lever arm (informational) [m]
+    wheel_accel_max_mps2: float | None = None           # its wheel rim-acceleration limit (informational) [m/s^2]
 
     def __post_init__(self):
         _finite("A", *(x for row in self.A for x in row))
@@ -89,6 +97,23 @@ class ExecutionModel:
             raise FieldError("residual_horizon_s", "must be >= 0")
         if not (0.0 < self.residual_coverage <= 1.0):
             raise FieldError("residual_coverage", "must be in (0, 1]")
+        for name in ("wheel_speed_max_mps", "wheel_yaw_lever_m", "wheel_accel_max_mps2"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v >= 0):
+                raise FieldError(name, "must be a finite number >= 0")
+
+
+@dataclass(frozen=True)
+class Tau95Parts:
+    """What tau95 is made of, as ``bigcbf calibrate`` measured it (informational; the stack uses tau95_s)."""
+
+    latency_s: float = 0.0              # command-to-wheel latency (largest over the axes of tau95) [s]
+    actuation_median_s: float = 0.0     # median half-way response delay of the clean command steps [s]
+    actuation95_s: float = 0.0          # their 95th percentile [s]
+    perception95_s: float = 0.0         # 95th percentile of the scan's age when a command is sent [s]
+
+    def __post_init__(self):
+        _finite("tau95_parts", self.latency_s, self.actuation_median_s, self.actuation95_s, self.perception95_s)
 
 
 @dataclass(frozen=True)
@@ -116,6 +141,7 @@ class UncertaintyParams:
     q_sigma_m2_per_s: float = 0.01     # Eq. (3) covariance growth, dynamic obstacles [m^2/s]
     q_sigma_static_m2_per_s: float = 0.0   # Eq. (3) covariance growth, static obstacles and wall points [m^2/s]
     execution: ExecutionModel = field(default_factory=ExecutionModel)
+    tau95_parts: Tau95Parts | None = None   # informational (written by bigcbf calibrate)
 
     def __post_init__(self):
         vals = dict(r_robot_m=self.r_robot_m, d0_m=self.d0_m, tau95_s=self.tau95_s, beta=self.beta,

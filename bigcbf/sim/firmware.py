@@ -5,6 +5,8 @@ No MuJoCo here. The hardware-imperfection layer realises paper Eq. (1) on the si
 actually sent to the wheels is ``A u + d + r + s`` (A 3x3, bias d, bounded residual r, lateral slip s), applied
 after a latency ``latency_s + U(0, latency_jitter_s)``; commands never overtake one another (a FIFO, like a serial
 link). The residual, the jitter and the slip each draw from their own random stream.
+Then, when the profile has wheel limits, :class:`WheelLimiter` saturates the wheel speeds and limits their
+acceleration, as a base's firmware does (Eq. (1) holds only below those limits).
 """
 from __future__ import annotations
 
@@ -22,7 +24,8 @@ class ImperfectionLayer:
     """Eq. (1) plus latency: turns issued commands into executed body twists, in time order."""
 
     def __init__(self, profile: RobotProfile, rng: np.random.Generator, rng_jitter: np.random.Generator | None = None,
-                 rng_slip: np.random.Generator | None = None):
+                 rng_slip: np.random.Generator | None = None, lever_m: float | None = None):
+        """``lever_m``: the wheel limits' default yaw lever arm (the kinematics' half wheelbase + half track)."""
         self.profile = profile
         self.rng = rng
         self.rng_jitter = rng if rng_jitter is None else rng_jitter
@@ -37,6 +40,11 @@ class ImperfectionLayer:
         self._residual = np.zeros(3)
         self._residual_until = -np.inf
         self.current = np.zeros(3)
+        #: the wheel limits (None: the profile has none, and the executed twist goes to the wheels as it is)
+        if lever_m is None:
+            kin = MecanumKinematics()
+            lever_m = kin.half_wheelbase_m + kin.half_track_m
+        self.limiter = WheelLimiter(profile, lever_m) if profile.has_wheel_limits else None
 
     def executed_twist(self, t: float, u) -> np.ndarray:
         """Eq. (1) (3-axis form): A u + d + r + s, r uniform in [-residual_max, residual_max], held
@@ -75,6 +83,54 @@ class ImperfectionLayer:
         while q and q[0][0] <= t + 1e-12:
             self.current = q.popleft()[1]
         return self.current
+
+
+def rim_matrix(lever_m: float) -> np.ndarray:
+    """R (4x3): wheel rim speeds [m/s] = R (vx, vy, wz) of the Mecanum inverse kinematics (wheel order fl, fr,
+    rl, rr; ``lever_m`` = half wheelbase + half track), as in ``MecanumKinematics.jacobian`` times the rolling
+    radius. For vy = 0 it is a differential drive's (rows vx -+ lever wz)."""
+    k = float(lever_m)
+    return np.array([[1.0, -1.0, -k], [1.0, 1.0, k], [1.0, 1.0, -k], [1.0, -1.0, k]])
+
+
+class WheelLimiter:
+    """The firmware's wheel-speed saturation and acceleration limit (robot profile keys ``wheel_speed_max_mps``,
+    ``wheel_accel_max_mps2``, ``wheel_yaw_lever_m``).
+
+    - saturation: a target twist whose fastest wheel rim speed max|R v| exceeds the limit is scaled by
+      limit / max|R v| (all wheels together: the direction of motion is kept, the axes are coupled);
+    - acceleration: each update moves the output twist toward the (saturated) target by a step whose largest
+      wheel change max|R dv| is at most ``wheel_accel_max_mps2`` times the time since the previous update.
+    """
+
+    def __init__(self, profile: RobotProfile, default_lever_m: float):
+        lever = profile.wheel_yaw_lever_m if profile.wheel_yaw_lever_m is not None else default_lever_m
+        self.R = rim_matrix(lever)
+        self.v_max = profile.wheel_speed_max_mps
+        self.a_max = profile.wheel_accel_max_mps2
+        self.out = np.zeros(3)
+        self._t = None
+
+    def saturate(self, twist) -> np.ndarray:
+        v = np.asarray(twist, float)
+        if self.v_max is None:
+            return v
+        peak = float(np.max(np.abs(self.R @ v)))
+        return v * (self.v_max / peak) if peak > self.v_max else v
+
+    def update(self, t: float, target) -> np.ndarray:
+        """The limited twist at time t for the executed (pre-limit) twist ``target``; call with increasing t."""
+        goal = self.saturate(target)
+        if self.a_max is None:
+            self.out = goal
+        else:                                   # the robot starts at rest: the first update moves nothing
+            last = t if self._t is None else self._t
+            step = goal - self.out
+            peak = float(np.max(np.abs(self.R @ step)))
+            room = self.a_max * max(t - last, 0.0)
+            self.out = self.out + (step * (room / peak) if peak > room else step)
+        self._t = t
+        return self.out
 
 
 class WheelOdometry:

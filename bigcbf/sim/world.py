@@ -50,7 +50,8 @@ class SimWorld:
         # independent random streams, so that e.g. LiDAR noise does not change the execution residuals
         rng = dict(zip(self.STREAMS, (np.random.default_rng(s)
                                       for s in np.random.SeedSequence(seed).spawn(len(self.STREAMS)))))
-        self.imperfection = ImperfectionLayer(profile, rng["residual"], rng["latency_jitter"], rng["slip"])
+        self.imperfection = ImperfectionLayer(profile, rng["residual"], rng["latency_jitter"], rng["slip"],
+                                              kinematics.half_wheelbase_m + kinematics.half_track_m)
         if lidar is None:
             lidar = LidarConfig.from_model(profile.lidar)
         self.lidar = Lidar(self.model, lidar, rng["lidar"])
@@ -109,7 +110,12 @@ class SimWorld:
                 hook(self)
             t = d.time
             twist = imp.at(t)
-            if twist is not self._ctrl_for:            # wheel targets change only with the executed twist
+            if imp.limiter is not None:                # the firmware's wheel limits (robot profile)
+                lim = imp.limiter.update(t, twist)
+                if self._ctrl_for is None or not np.array_equal(lim, self._ctrl_for):
+                    self._ctrl_for, self._ctrl = lim.copy(), self.kin.inverse(lim)
+                    d.ctrl[self._act] = self._ctrl
+            elif twist is not self._ctrl_for:          # wheel targets change only with the executed twist
                 self._ctrl_for, self._ctrl = twist, self.kin.inverse(twist)
                 d.ctrl[self._act] = self._ctrl
             nb = min(n, self.BLOCK_STEPS)

@@ -86,9 +86,14 @@ def test_profile_is_a_partial_stack_params_toml(tmp_path):
 
 def test_logs_that_cannot_be_calibrated():
     log = _synthetic_log(seconds=20)
-    short = LogData(log.path, cmd=TwistSeries("/cmd_vel", log.cmd.t[:5], log.cmd.u[:5]), odom=log.odom)
+    one = LogData(log.path, cmd=TwistSeries("/cmd_vel", log.cmd.t[:1], log.cmd.u[:1]), odom=log.odom)
     with pytest.raises(UserError, match="too few commands"):
-        calibrate_series(short)
+        calibrate_series(one)
+    # published on change, a single step and nothing else: the held command excites vx, but one change is no delay
+    u = np.array([[0.0, 0, 0], [0.5, 0, 0]])
+    step = LogData(log.path, cmd=TwistSeries("/cmd_vel", np.array([0.0, 5.0]), u), odom=log.odom)
+    with pytest.raises(UserError, match="change 1 time"):
+        calibrate_series(step)
     still = LogData(log.path, cmd=TwistSeries("/cmd_vel", log.cmd.t, np.zeros_like(log.cmd.u)), odom=log.odom)
     with pytest.raises(UserError, match="do not excite any axis"):
         calibrate_series(still)

@@ -164,5 +164,40 @@ def test_estimate_delay_recovers_latency_and_jitter_distribution():
     assert len(est.edge_delays_s) > 100
     # commands at 20 Hz, scans at 10 Hz: ages 0 and 0.05 -> the sum's 95 % quantile = 0.05 + actuation's upper part
     assert set(np.round(est.perception_latency_s, 6)) == {0.0, 0.05}
-    assert est.tau95_s == pytest.approx(tau95(est.edge_delays_s, est.perception_latency_s))
+    # tau95 from the translational axes' edges (Eq. (15) multiplies it by a translational velocity)
+    assert est.tau95_axes == (0, 1)
+    trans = np.isin(est.edge_axes, [0, 1])
+    assert est.tau95_s == pytest.approx(tau95(est.edge_delays_s[trans], est.perception_latency_s))
     assert est.actuation95_s < est.tau95_s <= est.actuation95_s + 0.05 + 1e-9
+
+
+def test_per_axis_delays_with_bootstrap_intervals():
+    """vx responds after 0.08 s, wz after 0.2 s (a filtered yaw rate, say): each axis gets its own delay, and the
+    bootstrap interval over segments covers it."""
+    from twin.delay import axis_delays
+    rng = np.random.default_rng(4)
+    t_cmd, u = _random_steps(rng, 120)
+    t_odom = np.arange(0, 120, 0.02)
+    v = _response(t_cmd, u, t_odom, dead_s=0.08, rng=rng, noise=0.01)
+    v[:, 2] = _response(t_cmd, u, t_odom, dead_s=0.2, rng=rng, noise=0.01)[:, 2]
+    opt = DelayOptions()
+    tg, ug, vg, ok = grid_signals(t_cmd, u, t_odom, v, opt.grid_s, opt.max_gap_s)
+    ax = axis_delays(ug, vg, ok, [0, 2], opt)
+    assert ax[0].delay_s == pytest.approx(0.08, abs=0.006) and ax[2].delay_s == pytest.approx(0.2, abs=0.006)
+    for j, true in ((0, 0.08), (2, 0.2)):
+        lo, hi = ax[j].ci_s
+        assert lo - 0.006 <= true <= hi + 0.006 and hi - lo < 0.03
+        assert not ax[j].tie
+
+
+def test_two_candidate_delays_that_nearly_tie_are_flagged():
+    from twin.delay import ties
+    # a curve with peaks 0.126 at 0.105 s and 0.124 at 0.295 s (the issue's example), grid 5 ms
+    lags = np.arange(0, 1.0001, 0.005)
+    curve = 0.126 * np.exp(-((lags - 0.105) / 0.02) ** 2) + 0.124 * np.exp(-((lags - 0.295) / 0.02) ** 2)
+    lag2, h2 = ties(curve, 0.005, 0.95, 0.04)
+    assert lag2 == pytest.approx(0.295, abs=0.003) and h2 == pytest.approx(0.124, abs=0.001)
+    # a second peak at 80 % is no tie; neither is the shoulder of the main peak
+    lag2, _ = ties(0.126 * np.exp(-((lags - 0.105) / 0.02) ** 2) + 0.1 * np.exp(-((lags - 0.295) / 0.02) ** 2),
+                   0.005, 0.95, 0.04)
+    assert np.isnan(lag2)

@@ -52,8 +52,10 @@ def test_gains_and_bias_recovered(cals, profile):
     gains = np.diag(np.asarray(profile.gain))
     assert cal.fit.identified.all() and cal.counts["saturated"] < 0.05 * cal.counts["aligned"]
     np.testing.assert_allclose(np.diag(cal.fit.A), gains, rtol=0.05)                     # the issue's 5 %
-    # relative to the model's own gains the profile's come out within 2 %
-    np.testing.assert_allclose(np.diag(cal.fit.A) / np.diag(ideal.fit.A), gains, rtol=0.02)
+    # relative to the model's own gains the translational ones come out within 2 %. Not yaw: the drive's fast corner
+    # steps (diagonal at 0.72 m/s with 0.9 rad/s) make the model's own rollers slip in yaw (its yaw gain reads
+    # ~0.93 on the ideal robot, less slip at the profile's slower yaw), so the ratio is no measure there
+    np.testing.assert_allclose((np.diag(cal.fit.A) / np.diag(ideal.fit.A))[:2], gains[:2], rtol=0.02)
     np.testing.assert_allclose(cal.fit.d, profile.bias, atol=0.02)
     assert abs(cal.fit.d[0] - 0.02) < 0.005
 
@@ -67,3 +69,33 @@ def test_residual_bound_held_out_coverage_within_3_points(cals):
     assert 0.03 < b.bound_knots.min() and b.bound_knots.max() < 0.09
     # the calibrated model beats the nominal v = u(t) on the held-out samples, on every axis
     assert np.all(cal.rmse_model < cal.rmse_nominal)
+
+
+def test_random_profiles_with_wheel_limits_recovered(limited_drives):
+    """Issue 14's tolerances on random hidden profiles with limits: wheel-speed limit within 10 %, acceleration
+    limit within 20 %, latency within 15 ms (the dead time less the model's own behind the same limits: the simulated
+    wheels' ~17 ms lag reads as dead time behind a ramp), gains within 5 %."""
+    for prof, cal, ref in limited_drives:
+        st, dyn = cal.model.static, cal.model.dynamic
+        assert st.v_max == pytest.approx(prof.wheel_speed_max_mps, rel=0.10)
+        assert dyn.accel_max == pytest.approx(prof.wheel_accel_max_mps2, rel=0.20)
+        latency = np.nanmedian(cal.latency_s) - np.nanmedian(ref.latency_s)
+        assert latency == pytest.approx(prof.latency_s + prof.latency_jitter_s / 2, abs=0.015)
+        np.testing.assert_allclose(np.diag(cal.fit.A), np.diag(np.asarray(prof.gain)), rtol=0.05)
+        # the summary says plainly that a linear model would be wrong, and what it would claim
+        assert any("A linear model v = A u + d is wrong above the limit" in n for n in cal.notes())
+        # coverage on all held-out samples (saturated ones fall outside Eq. (1)) and on the unsaturated ones
+        assert cal.coverage_heldout_all <= cal.coverage_heldout_transients
+        assert cal.bound.coverage_heldout == pytest.approx(0.95, abs=0.04)
+        # the profile written carries the limits and tau95's parts, and the stack reads it
+        d = cal.profile_dict()["uncertainty"]
+        assert d["execution"]["wheel_speed_max_mps"] == pytest.approx(st.v_max, abs=1e-4)
+        assert set(d["tau95_parts"]) == {"latency_s", "actuation_median_s", "actuation95_s", "perception95_s"}
+
+
+def test_a_log_without_limits_reports_none(cals):
+    """The drive of the profile without wheel limits: no wheel-speed limit is claimed."""
+    cal, ideal = cals
+    for c in (cal, ideal):
+        assert c.model.static.v_max is None
+        assert not any("saturates" in n for n in c.notes())

@@ -31,15 +31,21 @@ def test_vy_not_identified_and_not_guessed(cal):
 
 
 def test_fitted_model_beats_the_identity_model(cal):
-    """Held-out blocks: the calibrated model (delay, A, d) against the identity model v(t) = u(t)."""
+    """Held-out blocks: the calibrated model against the nominal model v(t) = u(t): on the settled samples (Eq. (1),
+    A and d) and on every held-out sample (the saturating model with its dead time, lag and acceleration limit)."""
     for j in (0, 2):
         assert cal.rmse_model[j] < cal.rmse_nominal[j]
-    assert np.sum(cal.rmse_model[[0, 2]] ** 2) < 0.7 * np.sum(cal.rmse_nominal[[0, 2]] ** 2)
+    ra = cal.rmse_all
+    assert np.all(ra["saturating"][[0, 2]] < ra["nominal"][[0, 2]])
+    assert np.sum(ra["saturating"][[0, 2]] ** 2) < 0.7 * np.sum(ra["nominal"][[0, 2]] ** 2)
 
 
 def test_delays_are_plausible_and_use_log_times(cal):
     d = cal.delay
-    assert 0.05 < d.xcorr_s < 0.25                     # Gazebo's diff-drive plugin + the planner's output
+    # the odometry's header stamps are on the log's clock (26 ms before the receive times, which are bursty: 17 %
+    # of the intervals under a fifth of the 33 ms period); on them the delay is 0.05 s (0.12 s on the receive times)
+    assert cal.timing.source == "header stamps"
+    assert 0.02 < d.xcorr_s < 0.25                     # Gazebo's diff-drive plugin + the planner's output
     assert d.perception_source == "header stamps"      # the stamps are on the log's clock here
     assert d.tau95_s > d.actuation95_s                 # scans at 5 Hz add their age
     assert cal.e_zoh_m == pytest.approx(cal.control_period_s * cal.speed_mps)

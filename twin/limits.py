@@ -1,0 +1,585 @@
+"""The saturating execution model: Eq. (1) below the robot's wheel limits, and what the firmware does above them.
+
+Every real base's firmware limits its wheels. A linear model v = A u + d (Eq. (1), eq:execution) fitted across a
+limit absorbs it into A and d (a gain that reads low, a bias that predicts motion at rest, cross gains of the wrong
+sign), so the limits are identified with the model they break, and A, d on the samples below them:
+
+    p(t) = A u(t - L) + d                          Eq. (1) without the residual, inputs delayed per axis (L_j)
+    s(t) = p(t) min(1, v_max / max|R p(t)|)        wheel-speed saturation, all wheels scaled together
+    x'   = the step toward s limited so that max|R dx| <= a_max dt     wheel-acceleration limit
+    y'   = (x - y) / T                              the drive's first-order response
+    v(t) = mean of y over [t - P, t]                the odometry's twist: encoder counts over its period P
+
+R (4x3) gives the wheel rim speeds of a twist, vx -+ vy -+ k wz (``rim_matrix``; for a differential drive, whose
+log never commands vy, the rows are its two wheels vx -+ k wz), with the yaw lever arm k (half wheelbase + half
+track of a Mecanum base, half the track of a differential drive) identified with the limit. The same model drives
+the simulated robot (bigcbf.sim.firmware.WheelLimiter, robot profile keys wheel_speed_max_mps, wheel_yaw_lever_m,
+wheel_accel_max_mps2), which is what ``bigcbf replay`` uses.
+
+Identification (:func:`fit_static`, :func:`fit_dynamic`):
+
+1. static part, on the settled samples (command held, response converged): A, d by least squares; then for each k
+   on a grid (0.05 to 0.6 m; fixed when the log does not move both translation and yaw) and v_max on a grid of the
+   samples' rim demands max|R p|, the squared error of the saturating model (per axis, scaled by the command's
+   spread); the best pair, the samples that ask more than 95 % of the limit left out (near the kink a small error in
+   the limit would bias the gains), A and d refitted, three times. The limit is reported
+   when it saturates at least ``min_saturated`` samples (and ``min_saturated_fraction`` of them), cuts the error of
+   those samples against a linear model fitted on every settled sample by ``improvement``, and cuts the total
+   error by at least 30 times the mean error per sample (a change the noise cannot make); otherwise the log does
+   not reach one.
+2. dynamic part, on every sample of the calibration blocks: the model simulated on a 10 ms grid (the commands
+   box-averaged over each step and the prediction interpolated to the odometry times, so that the fit moves
+   smoothly with L) for a batch of candidates at once: a common dead time L and lag T without acceleration limit;
+   then a_max (geometric grid, and none) with L and T around that; then finer; then L per axis. An acceleration
+   limit is reported when it lowers the error by ``accel_gain`` against none. The yaw lever is then chosen among
+   those the static part leaves plausible (within 25 noise variances of its best), by the transients: how fast a
+   combined step ramps depends on it. The per-axis dead times get a 5-95 %
+   interval by bootstrap over the calibration blocks (the error of each candidate summed per block).
+
+The dead time L is the command-to-wheel latency (what the robot profile's latency_s is in the simulator); T and the
+acceleration limit are the response after it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import lstsq
+
+AXES = ("vx", "vy", "wz")
+
+
+@dataclass(frozen=True)
+class LimitOptions:
+    lever_min_m: float = 0.05           # yaw lever arm grid lever_min_m..lever_max_m [m] (no base has its wheels
+    lever_max_m: float = 0.6            # closer than 5 cm to its centre)
+    lever_steps: int = 56
+    speed_steps: int = 80               # rim-speed limit grid (quantiles of the demands)
+    min_saturated: int = 20             # samples beyond the limit, at least [-]
+    min_saturated_fraction: float = 0.01
+    improvement: float = 0.3            # the saturating model cuts the linear model's error by this fraction [-]
+    kink_margin: float = 0.05           # A, d are fitted on samples asking at most (1 - this) of the limit [-]
+    step_s: float = 0.01                # simulation grid of the dynamic fit [s]
+    max_delay_s: float = 1.0            # dead-time search range [s]
+    lags_s: tuple[float, ...] = (0.0, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)
+    accel_min: float = 0.2              # acceleration-limit grid [m/s^2 of rim]
+    accel_max: float = 40.0
+    accel_gain: float = 0.03            # a limit is reported when it lowers the error by this fraction [-]
+    bootstrap: int = 400
+
+
+def rim_matrix(lever_m: float) -> np.ndarray:
+    """R (4x3): wheel rim speeds = R (vx, vy, wz) (module docstring; as bigcbf.sim.firmware.rim_matrix)."""
+    k = float(lever_m)
+    return np.array([[1.0, -1.0, -k], [1.0, 1.0, k], [1.0, 1.0, -k], [1.0, -1.0, k]])
+
+
+def rim_demand(p: np.ndarray, lever_m) -> np.ndarray:
+    """max |R p| per row of p (n, 3): the fastest wheel's rim speed. The four wheels are the four sign combinations
+    of vx +- vy +- k wz, so (k >= 0) max|R p| = |vx| + |vy| + k |wz|; ``lever_m`` may be one value per row."""
+    p = np.asarray(p, float)
+    return np.abs(p[..., 0]) + np.abs(p[..., 1]) + np.asarray(lever_m, float) * np.abs(p[..., 2])
+
+
+def saturate(p: np.ndarray, v_max: float | None, lever_m: float) -> np.ndarray:
+    """p scaled by min(1, v_max / max|R p|) per row (no limit: p)."""
+    p = np.asarray(p, float)
+    if v_max is None:
+        return p
+    D = rim_demand(p, lever_m)
+    return p * np.minimum(1.0, v_max / np.maximum(D, 1e-12))[..., None]
+
+
+def least_squares(u: np.ndarray, v: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (1): A, d minimising sum ||v - (A u + d)||^2 over the identified axes (identity rows elsewhere)."""
+    A, d = np.eye(3), np.zeros(3)
+    idx = np.flatnonzero(axes)
+    if len(idx) == 0 or len(u) <= len(idx):
+        return A, d
+    X = np.column_stack([u[:, idx], np.ones(len(u))])
+    beta, *_ = lstsq(X, v[:, idx])
+    for col, j in enumerate(idx):
+        A[j, :] = 0.0
+        A[j, idx] = beta[:-1, col]
+        d[j] = beta[-1, col]
+    return A, d
+
+
+def _scale(u: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    s = np.ones(3)
+    s[axes] = np.maximum(np.asarray(u, float)[:, axes].std(axis=0), 1e-3)
+    return s
+
+
+@dataclass
+class StaticFit:
+    """The static part of the saturating model (step 1 of the module docstring)."""
+    A: np.ndarray
+    d: np.ndarray
+    v_max: float | None                 # rim-speed limit [m/s] (None: not reached by the log)
+    lever_m: float                      # yaw lever arm of the limit [m]
+    lever_range_m: tuple[float, float]  # levers within 4 noise variances of the best error (wide: not identified) [m]
+    lever_identified: bool
+    demand_max: float                   # the largest rim demand max|R (A u + d)| of the settled samples [m/s]
+    n_saturated: int                    # settled samples beyond the limit
+    cost_linear: float                  # error of A, d fitted on every settled sample (no limit)
+    cost_saturating: float              # error of this model
+    A_linear: np.ndarray                # the linear fit across the limit (what a linear model would claim)
+    d_linear: np.ndarray
+    lever_grid: np.ndarray = field(default_factory=lambda: np.zeros(0))     # the levers tried [m]
+    v_max_by_lever: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the best limit at each [m/s]
+    cost_by_lever: np.ndarray = field(default_factory=lambda: np.zeros(0))   # and its error
+    n_samples: int = 0
+
+    def plausible_levers(self, sigmas: float = 5.0, most: int = 7) -> np.ndarray:
+        """Levers whose static error is within ``sigmas``^2 noise variances of the best (at most ``most``, evenly
+        spread): the candidates the dynamic fit chooses among (a ramp's rate depends on the lever too)."""
+        if self.v_max is None or len(self.cost_by_lever) == 0:
+            return np.array([self.lever_m])
+        c = self.cost_by_lever
+        ok = np.flatnonzero(np.isfinite(c) & (c <= np.nanmin(c) * (1 + sigmas ** 2 / max(self.n_samples, 1))))
+        if len(ok) > most:
+            ok = ok[np.linspace(0, len(ok) - 1, most).round().astype(int)]
+        return np.unique(np.r_[self.lever_grid[ok], self.lever_m])
+
+    def at_lever(self, k: float) -> "StaticFit":
+        """This fit with the lever k and the limit that goes with it (from the static profile)."""
+        import dataclasses
+        if self.v_max is None or len(self.lever_grid) == 0:
+            return self
+        i = int(np.argmin(np.abs(self.lever_grid - k)))
+        vm = self.v_max_by_lever[i] if abs(self.lever_grid[i] - k) < 1e-9 else self.v_max
+        return dataclasses.replace(self, lever_m=float(k), v_max=float(vm))
+
+    def predict(self, u: np.ndarray) -> np.ndarray:
+        """The settled response: sat(A u + d)."""
+        return saturate(np.asarray(u, float) @ self.A.T + self.d, self.v_max, self.lever_m)
+
+    def demand(self, u: np.ndarray) -> np.ndarray:
+        return rim_demand(np.asarray(u, float) @ self.A.T + self.d, self.lever_m)
+
+    def saturated(self, u: np.ndarray) -> np.ndarray:
+        """True where the command asks more than the rim-speed limit (by 2 %)."""
+        if self.v_max is None:
+            return np.zeros(len(u), bool)
+        return self.demand(u) > 1.02 * self.v_max
+
+
+def _lever_grid(axes: np.ndarray, opt: LimitOptions) -> tuple[np.ndarray, bool]:
+    """(levers to try, whether the lever can be identified): both translation and yaw must be excited."""
+    trans, yaw = bool(axes[0] or axes[1]), bool(axes[2])
+    if trans and yaw:
+        return np.linspace(opt.lever_min_m, opt.lever_max_m, opt.lever_steps), True
+    return np.array([0.0 if trans else 1.0]), False
+
+
+def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions = LimitOptions()) -> StaticFit:
+    """Step 1 of the module docstring on settled samples: aligned commands u (n, 3), measured twists v (n, 3)."""
+    u, v = np.asarray(u, float), np.asarray(v, float)
+    axes = np.asarray(axes, bool)
+    idx = np.flatnonzero(axes)
+    sc = _scale(u, axes)
+
+    def cost(pred, w=None):
+        e = ((v[:, idx] - pred[..., idx]) / sc[idx]) ** 2
+        return e.sum(axis=(-1, -2)) if w is None else (e.sum(axis=-1) * w).sum(axis=-1)
+
+    A_lin, d_lin = least_squares(u, v, axes)
+    cost_lin = float(cost(u @ A_lin.T + d_lin))
+    levers, lever_id = _lever_grid(axes, opt)
+    A, d = A_lin, d_lin
+    best = (None, float(levers[0]), cost_lin)
+    prof = np.full(len(levers), np.inf)
+    cands = [(None, float(k), np.inf) for k in levers]
+    for _ in range(3):
+        p = u @ A.T + d
+        prof = np.full(len(levers), np.inf)
+        cands = []
+        for i, k in enumerate(levers):
+            D = rim_demand(p, k)
+            grid = np.unique(np.quantile(D, np.linspace(0.3, 1.0, opt.speed_steps)))
+            for _ in range(2):                      # the quantile grid, then 41 values between its neighbours
+                ratio = np.minimum(1.0, grid[:, None] / np.maximum(D[None, :], 1e-12))  # (G, n)
+                c = cost(p[None, :, :] * ratio[:, :, None])                             # (G,)
+                g = int(np.argmin(c))
+                vm_best, c_best = float(grid[g]), float(c[g])
+                grid = np.linspace(grid[max(g - 1, 0)], grid[min(g + 1, len(grid) - 1)], 41)
+            prof[i] = c_best
+            cands.append((vm_best, float(k), c_best))
+        vm, k, c = cands[int(np.argmin(prof))]
+        # A, d from the samples clearly below the limit: near the kink a small error in the limit or the lever
+        # would count saturated samples as linear ones and pull the gains down
+        sat = rim_demand(p, k) > vm * (1 - opt.kink_margin)
+        if (~sat).sum() <= len(idx) + 1:
+            break
+        A_new, d_new = least_squares(u[~sat], v[~sat], axes)
+        best = (vm, k, c)
+        if np.allclose(A_new, A, atol=1e-6) and np.allclose(d_new, d, atol=1e-7):
+            break
+        A, d = A_new, d_new
+    vm, k, _ = best
+    p = u @ A.T + d
+    D = rim_demand(p, k)
+    beyond = D > 1.02 * vm if vm is not None else np.zeros(len(u), bool)
+    n_sat = int(beyond.sum())
+    pred = saturate(p, vm, k) if vm is not None else p
+    cost_sat = float(cost(pred)) if vm is not None else cost_lin
+    # the limit must explain the samples beyond it (their error against the linear model cut by ``improvement``)
+    # and be significant against the noise of the rest (the cut at least 30 times the mean error per sample)
+    lin = u @ A_lin.T + d_lin
+    sc_idx = sc[idx]
+    e_lin_b = float((((v[beyond][:, idx] - lin[beyond][:, idx]) / sc_idx) ** 2).sum())
+    e_sat_b = float((((v[beyond][:, idx] - pred[beyond][:, idx]) / sc_idx) ** 2).sum())
+    noise = cost_sat / max(len(u), 1)
+    reached = (vm is not None and n_sat >= max(opt.min_saturated, opt.min_saturated_fraction * len(u))
+               and e_sat_b <= (1 - opt.improvement) * e_lin_b and cost_lin - cost_sat > 30 * noise)
+    # levers whose error is within 4 noise variances (the error per sample) of the best: an interval of about 2 sigma
+    near = levers[prof <= np.min(prof) * (1 + 4.0 / max(len(u), 1))] if np.isfinite(prof).any() else levers
+    lever_range = (float(near.min()), float(near.max()))
+    lever_ok = lever_id and reached and (lever_range[1] - lever_range[0]) <= 0.25 * opt.lever_max_m
+    if not reached:
+        A, d = A_lin, d_lin
+        vm, n_sat, cost_sat = None, 0, cost_lin
+    return StaticFit(A, d, vm, float(k), lever_range, bool(lever_ok), float(rim_demand(u @ A.T + d, k).max())
+                     if len(u) else 0.0, n_sat, cost_lin, cost_sat, A_lin, d_lin, levers,
+                     np.array([np.nan if c[0] is None else c[0] for c in cands]) if reached else np.zeros(0),
+                     np.array([c[2] for c in cands]) if reached else np.zeros(0), len(u))
+
+
+# --- the dynamic part ------------------------------------------------------------------------------------------
+class _Integral:
+    """The running integral of the held commands, for box averages over a grid step at any delay."""
+
+    def __init__(self, t_cmd: np.ndarray, u_cmd: np.ndarray):
+        self.t = np.asarray(t_cmd, float)
+        self.u = np.asarray(u_cmd, float)
+        dt = np.diff(self.t)
+        self.I = np.vstack([np.zeros((1, 3)), np.cumsum(self.u[:-1] * dt[:, None], axis=0)])
+
+    def at(self, t: np.ndarray, j: int) -> np.ndarray:
+        """Integral of u_j from t_cmd[0] to t (u_j = its first value before, the last one after)."""
+        t = np.asarray(t, float)
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 1)
+        return self.I[k, j] + self.u[k, j] * (t - self.t[k])
+
+    def box(self, tg: np.ndarray, h: float, delay: float, j: int) -> np.ndarray:
+        """Mean of u_j(s - delay) over s in [tg - h, tg]."""
+        return (self.at(tg - delay, j) - self.at(tg - h - delay, j)) / h
+
+
+@dataclass
+class Candidates:
+    L: np.ndarray       # (C, 3) dead times per input axis [s]
+    T: np.ndarray       # (C,) lags [s]
+    a: np.ndarray       # (C,) acceleration limits [m/s^2 of rim] (inf: none)
+    k: np.ndarray | None = None      # (C,) yaw levers (None: the static fit's) [m]
+    v_max: np.ndarray | None = None  # (C,) rim-speed limits that go with them [m/s]
+
+    @staticmethod
+    def grid(L, T, a) -> "Candidates":
+        L = np.atleast_2d(np.asarray(L, float))
+        if L.shape[1] == 1:
+            L = np.repeat(L, 3, axis=1)
+        iL, iT, ia = np.meshgrid(np.arange(len(L)), np.arange(len(T)), np.arange(len(a)), indexing="ij")
+        return Candidates(L[iL.ravel()], np.asarray(T, float)[iT.ravel()], np.asarray(a, float)[ia.ravel()])
+
+    def __len__(self):
+        return len(self.T)
+
+
+@dataclass
+class DynamicProblem:
+    """What the dynamic fit simulates against: the commands, the samples it scores, the static model."""
+    t_cmd: np.ndarray
+    u_cmd: np.ndarray
+    ts: np.ndarray          # sample (odometry) times [s]
+    vs: np.ndarray          # measured twists (M, 3)
+    use: np.ndarray         # (M,) samples that count
+    block: np.ndarray       # (M,) block index of each sample (bootstrap)
+    axes: np.ndarray        # identified axes
+    static: StaticFit
+    h: float = 0.01
+    avg_s: float = 0.0      # the odometry reports the mean twist over this span before its time [s]
+
+    def __post_init__(self):
+        self.integral = _Integral(self.t_cmd, self.u_cmd)
+        self.scale = _scale(np.column_stack([np.interp(self.ts, self.t_cmd, self.u_cmd[:, j]) for j in range(3)]),
+                            self.axes)
+        t0 = max(float(self.ts[0]), float(self.t_cmd[0]))
+        t1 = float(self.ts[-1])
+        self.tg = t0 + self.h * np.arange(int(np.floor((t1 - t0) / self.h)) + 2)
+        self.nblocks = int(self.block.max()) + 1 if len(self.block) else 1
+        # samples between grid points n-1 and n are scored at step n (linear interpolation)
+        ok = self.use & (self.ts > self.tg[0]) & (self.ts <= self.tg[-1])
+        m = np.flatnonzero(ok)
+        n = np.searchsorted(self.tg, self.ts[m], side="left")
+        self._steps = {}
+        for mi, ni in zip(m, n):
+            self._steps.setdefault(int(ni), []).append(int(mi))
+
+    def simulate(self, cand: Candidates, keep: bool = False):
+        """Run the candidates; returns the error per (candidate, block, axis) (C, B, 3), and with ``keep`` also the
+        prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3))."""
+        C = len(cand)
+        st = self.static
+        A, d = st.A, st.d
+        kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
+        vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
+        # command box averages per unique delay and axis
+        cols = []
+        for j in range(3):
+            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
+            table = np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T    # (N, U)
+            cols.append((np.ascontiguousarray(table), inv))
+        alpha = np.where(cand.T > 0, 1.0 - np.exp(-self.h / np.maximum(cand.T, 1e-12)), 1.0)[:, None]
+        room = (cand.a * self.h)[:, None]
+        v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
+        x = np.tile(v0, (C, 1))
+        y = x.copy()
+        err = np.zeros((C, self.nblocks, 3))
+        pred = np.zeros((C, len(self.ts), 3)) if keep else None
+        targ = np.zeros((C, len(self.ts), 3)) if keep else None
+        inp = np.zeros((C, len(self.ts), 3)) if keep else None
+        wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
+        has_lim = np.isfinite(vmc).any()
+        has_a = np.isfinite(cand.a).any()
+        u = np.empty((C, 3))
+        K = int(round(self.avg_s / self.h))            # the odometry's average: trapezoid over the last K steps
+        buf = [y.copy() for _ in range(K + 1)] if K > 0 else None
+        run = sum(buf) if K > 0 else None
+        ya = y.copy()
+        for n in range(len(self.tg)):
+            for j in range(3):
+                table, inv = cols[j]
+                u[:, j] = table[n, inv]
+            p = u @ A.T + d
+            if has_lim:
+                ap = np.abs(p)
+                D = ap[:, 0] + ap[:, 1] + kc * ap[:, 2]
+                p *= np.minimum(1.0, vmc / np.maximum(D, 1e-12))[:, None]
+            if has_a:
+                step = p - x
+                ast = np.abs(step)
+                rim = (ast[:, 0] + ast[:, 1] + kc * ast[:, 2])[:, None]
+                x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
+            else:
+                x = p
+            y = y + (x - y) * alpha
+            ya_prev = ya
+            if K > 0:
+                old = buf.pop(0)
+                buf.append(y)
+                run = run - old + y
+                ya = (run - 0.5 * (buf[0] + y)) / K
+            else:
+                ya = y
+            ms = self._steps.get(n)
+            if ms is not None:
+                for mi in ms:
+                    f = (self.ts[mi] - self.tg[n - 1]) / self.h
+                    yi = ya_prev + (ya - ya_prev) * f
+                    err[:, self.block[mi], :] += ((yi - self.vs[mi]) * wsc) ** 2
+                    if keep:
+                        pred[:, mi] = yi
+                        targ[:, mi] = p
+                        inp[:, mi] = u
+        return (err, pred, targ, inp) if keep else err
+
+
+@dataclass
+class DynamicFit:
+    """The dynamic part (step 2 of the module docstring)."""
+    latency_s: np.ndarray               # (3,) dead time per axis [s] (nan: not identified)
+    latency_ci_s: np.ndarray            # (3, 2) bootstrap 5-95 % [s]
+    lag_s: float                        # first-order lag T [s]
+    accel_max: float | None             # rim acceleration limit [m/s^2] (None: none seen)
+    accel_floor: float                  # without one, the response is at least this fast [m/s^2]
+    cost: float
+    cost_no_accel: float
+    notes: list[str] = field(default_factory=list)
+    lever_m: float | None = None        # the yaw lever the transients chose among the plausible static ones
+
+    def candidate(self) -> Candidates:
+        L = np.where(np.isfinite(self.latency_s), self.latency_s, np.nanmax(self.latency_s))
+        return Candidates(L[None, :], np.array([self.lag_s]),
+                          np.array([np.inf if self.accel_max is None else self.accel_max]))
+
+
+def _best(err: np.ndarray, axes: np.ndarray) -> tuple[int, np.ndarray]:
+    tot = err[:, :, axes].sum(axis=(1, 2))
+    return int(np.argmin(tot)), tot
+
+
+def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: int = 0,
+                start: tuple[float, float, float] | None = None) -> DynamicFit:
+    """Step 2 of the module docstring (``start`` = (L, T, a) skips the coarse stages)."""
+    axes = prob.axes
+    lags = np.asarray(opt.lags_s)
+    acc = np.concatenate([np.geomspace(opt.accel_min, opt.accel_max, 16), [np.inf]])
+    if start is None:
+        # 1. common dead time and lag, no acceleration limit
+        L1 = np.arange(0.0, opt.max_delay_s + 1e-9, 0.02)
+        c1 = Candidates.grid(L1[:, None], lags, [np.inf])
+        i, _ = _best(prob.simulate(c1), axes)
+        L0, T0 = float(c1.L[i, 0]), float(c1.T[i])
+        # 2. acceleration limit (and none), dead time at or below the first guess (a ramp delays the response)
+        L2 = np.clip(L0 + np.arange(-0.12, 0.041, 0.02), 0.0, opt.max_delay_s)
+        T2 = np.unique(np.clip([0.0, T0 / 2, T0, 0.05, 0.1], 0, None))
+        c2 = Candidates.grid(np.unique(L2)[:, None], T2, acc)
+        i, _ = _best(prob.simulate(c2), axes)
+        L0, T0, a0 = float(c2.L[i, 0]), float(c2.T[i]), float(c2.a[i])
+    else:
+        L0, T0, a0 = (float(x) for x in start)
+    # 3. finer, with and without the limit
+    L3 = np.clip(L0 + np.arange(-0.015, 0.0151, 0.005), 0.0, opt.max_delay_s)
+    T3 = np.unique(np.clip(np.r_[0.0, T0 * np.array([0.5, 0.75, 1.0, 1.33, 2.0]), T0 + 0.01], 0, None))
+    a3 = np.r_[a0 * np.geomspace(0.8, 1.25, 7), np.inf] if np.isfinite(a0) else np.array([np.inf])
+    c3 = Candidates.grid(np.unique(L3)[:, None], T3, a3)
+    err3 = prob.simulate(c3)
+    i, tot = _best(err3, axes)
+    L0, T0, a0 = float(c3.L[i, 0]), float(c3.T[i]), float(c3.a[i])
+    best_cost = float(tot[i])
+    none = ~np.isfinite(c3.a)
+    cost_none = float(tot[none].min()) if none.any() else best_cost
+    if np.isfinite(a0) and cost_none <= (1 + opt.accel_gain) * best_cost:
+        j = int(np.flatnonzero(none)[np.argmin(tot[none])])
+        L0, T0, a0, best_cost = float(c3.L[j, 0]), float(c3.T[j]), np.inf, cost_none
+    # 3b. the yaw lever among those the static limit allows (a combined step's ramp depends on it)
+    lever = None
+    levers = prob.static.plausible_levers()
+    if len(levers) > 1:
+        vms = np.array([prob.static.at_lever(k).v_max for k in levers])
+        La = np.clip(L0 + np.array([-0.01, -0.005, 0.0, 0.005, 0.01]), 0.0, opt.max_delay_s)
+        aa = a0 * np.array([0.9, 0.95, 1.0, 1.05, 1.1]) if np.isfinite(a0) else np.array([np.inf])
+        iL, ia, ik = np.meshgrid(np.arange(len(La)), np.arange(len(aa)), np.arange(len(levers)), indexing="ij")
+        c3b = Candidates(np.repeat(La[iL.ravel()][:, None], 3, axis=1), np.full(iL.size, T0), aa[ia.ravel()],
+                         levers[ik.ravel()], vms[ik.ravel()])
+        i, tot3b = _best(prob.simulate(c3b), axes)
+        L0, a0, lever = float(c3b.L[i, 0]), float(c3b.a[i]), float(c3b.k[i])
+        best_cost = float(tot3b[i])
+        prob = DynamicProblem(prob.t_cmd, prob.u_cmd, prob.ts, prob.vs, prob.use, prob.block, prob.axes,
+                              prob.static.at_lever(lever), prob.h, prob.avg_s)
+    # 4. dead time per axis, bootstrap over blocks
+    rng = np.random.default_rng(seed)
+    offs = np.arange(-0.05, 0.0501, 0.005)
+    rows, which = [], []
+    for j in np.flatnonzero(axes):
+        for o in offs:
+            L = np.full(3, L0)
+            L[j] = max(L0 + o, 0.0)
+            rows.append(L)
+            which.append(j)
+    lat = np.full(3, np.nan)
+    ci = np.full((3, 2), np.nan)
+    if rows:
+        c4 = Candidates(np.array(rows), np.full(len(rows), T0), np.full(len(rows), a0))
+        err4 = prob.simulate(c4)
+        which = np.array(which)
+        W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
+        for j in np.flatnonzero(axes):
+            sel = np.flatnonzero(which == j)
+            e = err4[sel][:, :, j]                      # (K, B): axis j's own error per block
+            lat[j] = float(c4.L[sel[np.argmin(e.sum(axis=1))], j])
+            boot = c4.L[sel[np.argmin(W @ e.T, axis=1)], j]
+            ci[j] = np.quantile(boot, [0.05, 0.95])
+    notes = []
+    for j in np.flatnonzero(axes):
+        if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
+            notes.append(f"the {AXES[j]} dead time sits at the edge of its search ({lat[j]:.3f} s, common "
+                         f"{L0:.3f} s +- 0.05 s): that axis responds unlike the others")
+    if np.isfinite(a0) and a0 >= opt.accel_max:      # at the top of the grid: no limit the log can show
+        a0 = np.inf
+    floor = float(opt.accel_max) if not np.isfinite(a0) else float(a0)
+    return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes, lever)
+
+
+@dataclass
+class SaturatingModel:
+    """The whole saturating execution model of a log, and what it says about each sample."""
+    static: StaticFit
+    dynamic: DynamicFit
+    y: np.ndarray            # (M, 3) the model's prediction at every sample
+    target: np.ndarray       # (M, 3) the saturated target sat(A u(t - L) + d)
+    u_delayed: np.ndarray    # (M, 3) the commands delayed by the dead times (box-averaged over a grid step)
+    settled: np.ndarray      # (M,) the model's response has converged to its target
+    saturated: np.ndarray    # (M,) the command asks more than the rim-speed limit
+    scored: np.ndarray       # (M,) samples inside the simulated span
+
+
+def _predict(t_cmd, u_cmd, t, v, axes, static: StaticFit, dyn: DynamicFit, h: float, avg_s: float = 0.0):
+    prob = DynamicProblem(t_cmd, u_cmd, t, v, np.ones(len(t), bool), np.zeros(len(t), int), axes, static, h, avg_s)
+    _, y, s, u = prob.simulate(dyn.candidate(), keep=True)
+    scored = np.zeros(len(t), bool)
+    for ms in prob._steps.values():
+        scored[ms] = True
+    return y[0], s[0], u[0], scored
+
+
+def settled_by_model(y: np.ndarray, target: np.ndarray, axes: np.ndarray,
+                     tol: tuple[float, float, float] = (0.02, 0.02, 0.04), rel: float = 0.03) -> np.ndarray:
+    """True where the model's response is within max(tol_j, rel |target_j|) of its target on every identified
+    axis (the dynamics have caught up: Eq. (1) is a static map and holds there)."""
+    lim = np.maximum(np.asarray(tol, float)[None, :], rel * np.abs(target))
+    ok = np.abs(y - target) <= lim
+    return np.all(ok[:, np.asarray(axes, bool)], axis=1)
+
+
+def steady_samples(t: np.ndarray, v: np.ndarray, axes: np.ndarray, window_s: float = 0.3,
+                   tol: tuple[float, float, float] = (0.02, 0.02, 0.04), rel: float = 0.03) -> np.ndarray:
+    """True where the *measured* twist has stopped changing: on every identified axis the mean over the last half
+    of a trailing ``window_s`` differs from the mean over its first half by at most max(tol_j, 4 noise standard
+    errors) + rel |v_j| (the noise from the median absolute first difference). A model can call a sample settled
+    because it believes the robot reached a limit it has not; the measurement cannot."""
+    t, v = np.asarray(t, float), np.asarray(v, float)
+    n = len(t)
+    out = np.ones(n, bool)
+    i_mid = np.searchsorted(t, t - window_s / 2, side="left")
+    i_start = np.searchsorted(t, t - window_s, side="left")
+    for j in np.flatnonzero(axes):
+        c = np.r_[0.0, np.cumsum(v[:, j])]
+        n_a = np.arange(n) + 1 - i_mid
+        n_b = i_mid - i_start
+        ok = (n_a >= 2) & (n_b >= 2)
+        a = (c[np.arange(n) + 1] - c[i_mid]) / np.maximum(n_a, 1)
+        b = (c[i_mid] - c[i_start]) / np.maximum(n_b, 1)
+        sigma = 1.4826 * np.median(np.abs(np.diff(v[:, j]))) / np.sqrt(2) if n > 2 else 0.0
+        lim = np.maximum(tol[j], 4 * sigma * np.sqrt(1 / np.maximum(n_a, 1) + 1 / np.maximum(n_b, 1))) + rel * np.abs(a)
+        out &= ok & (np.abs(a - b) <= lim)
+    return out
+
+
+def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_init: np.ndarray,
+              settled_init: np.ndarray, opt: LimitOptions = LimitOptions(), min_settled: int = 100,
+              avg_s: float = 0.0, rounds: int = 3) -> SaturatingModel:
+    """Steps 1-2 of the module docstring, iterated: the static part on the settled samples of the calibration blocks
+    (``cal``; at first those of ``settled_init``, with the commands ``u_init``), the dynamic part on every sample of
+    the calibration blocks; then, up to ``rounds`` times until the static part stops changing, the static part again
+    on the samples the model says have settled (and, where the model saturates, whose measured twist has stopped
+    changing: :func:`steady_samples`), with the commands delayed by the dead times, and the dynamic part refined."""
+    axes = np.asarray(axes, bool)
+    steady_meas = steady_samples(t, v, axes)
+    st = fit_static(u_init[cal & settled_init], v[cal & settled_init], axes, opt)
+    dyn = None
+    for r in range(rounds + 1):
+        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.step_s, avg_s)
+        if dyn is None:
+            dyn = fit_dynamic(prob, opt)
+        else:
+            a = np.inf if dyn.accel_max is None else dyn.accel_max
+            dyn = fit_dynamic(prob, opt, start=(float(np.nanmedian(dyn.latency_s)), dyn.lag_s, a))
+        if dyn.lever_m is not None:
+            st = st.at_lever(dyn.lever_m)
+        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
+        # where the model has its target saturated, the measurement must agree that the robot stopped changing
+        settled = settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
+        use = cal & settled
+        if r == rounds or use.sum() < min_settled:
+            break
+        new = fit_static(u[use], v[use], axes, opt)
+        same = ((new.v_max is None) == (st.v_max is None)
+                and (new.v_max is None or abs(new.v_max / st.v_max - 1) < 0.01)
+                and np.allclose(new.A, st.A, atol=0.005))
+        st = new
+        if same and r >= 1:
+            break
+    return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored)
