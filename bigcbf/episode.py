@@ -250,11 +250,11 @@ class Episode:
         return self._scan
 
     def obstacles_now(self) -> Obstacles:
-        """The estimates at the pending control tick, advanced to now with their velocity (Eq. (2)). They are up to
-        one scan period old; when scans went missing (a LiDAR fault), older: then the age beyond one scan period
-        also grows their covariance as the prediction does, Sigma + q_Sigma,i (age - T_scan) I (Eq. (3), q_Sigma,i
-        of ``prediction.q_sigma_for``). Within one scan period the covariance is the perception's (the sensor's
-        normal rate)."""
+        """The estimates at the pending control tick, advanced to now with their velocity (Eq. (2),
+        ``eq:obs_prop``). They are up to one scan period old; when scans went missing (a LiDAR fault), older: then
+        the age beyond one scan period also grows their covariance as the prediction does, Sigma + q_Sigma,i (age -
+        T_scan) I (Eq. (3), ``eq:cov_prop``; q_Sigma,i of ``prediction.q_sigma_for``). Within one scan period the
+        covariance is the perception's (the sensor's normal rate). docs/fidelity.md: "Missing scans"."""
         obstacles, age = self._obstacles, self.world.t - self._scan_t
         if age <= 0 or len(obstacles) == 0:
             return obstacles

@@ -64,7 +64,9 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
                 if reach > ROOM_EXTENT_M - 0.6:
                     raise RuntimeError(f"the calibration drive left the room's free space (|p| = {reach:.2f} m)")
             if k % SCAN_EVERY == 0:
-                w.scan(t, world.scan())
+                scan = world.scan()          # None: the profile's scan dropout lost it (nothing is logged)
+                if scan is not None:
+                    w.scan(t, scan)
             if k % CMD_EVERY == 0:
                 i = k // CMD_EVERY
                 if i < len(u_cmd):

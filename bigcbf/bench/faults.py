@@ -30,8 +30,10 @@ pedestrian_turns    every pedestrian turns at random: mild 90 deg to a random si
                     severe 180 deg (turns back) for 2 s at 0.2 per second; crowd_crossing, single_person_crossing
 ==================  =================================================================================================
 
-The report (``bigcbf/bench/report.py``) gives success and collisions per method, fault and level (each fault's
-``none`` column: its scenes without the fault). A SuiteEntry's family is the fault (``none`` for the shipped scenes)
+The stack is not told: its perception and stack parameters stay those of the simulated X3 (e.g. the perception
+still assumes the X3's range noise under ``lidar_noise``). The report (``bigcbf/bench/report.py``) gives success
+and collisions per method, fault and level (each fault's ``none`` column: its scenes without the fault); results
+of a 2-seed run in docs/benchmark.md ("The faults suite"). A SuiteEntry's family is the fault (``none`` for the shipped scenes)
 and its split the level; ``bigcbf bench --suite faults --split severe`` runs one level.
 """
 from __future__ import annotations
