@@ -3,7 +3,9 @@
     world (physics, 2 ms) -> LiDAR (10 Hz) -> perception -> planner (every T_C; BIG-CBF selects every T_B)
       -> common hard CBF filter (T_C = 50 ms) -> firmware and imperfection layer -> wheels
 
-The stack sees only the LiDAR scans and the wheel odometry (pose in odom, body twist). Ground truth is used for
+The stack sees only the LiDAR scans and the wheel odometry (pose in odom, body twist); faults of the robot profile
+and the scenario (bigcbf/params/faults.py) reach it only through them: a scan that never arrives leaves the last
+estimates in force, ageing (``obstacles_now``). Ground truth is used for
 the metrics (collision, clearance) and for the pedestrians' motion, and, only in the flagged ``truth`` perception
 mode, for the obstacle estimates. Success follows the paper: the robot's own state reaches the goal region
 (Eq. (5) on the controller's state x); the true distance to the goal at the end is reported too.
@@ -21,6 +23,7 @@ from .control.methods import make_planner
 from .control.liveness import LivenessRecorder
 from .control.metrics import cbf_energy, margin_stats
 from .control.planner import PlanInfo
+from .control.prediction import q_sigma_for
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
@@ -64,6 +67,8 @@ class EpisodeResult:
     #: control steps at which the CBF filter found the obstacle estimates non-finite or implausible and braked
     #: (FilterInfo.fallback "perception-fault", see control/cbf.py)
     perception_faults: int = 0
+    #: LiDAR scans that never arrived (the robot profile's scan dropout, bigcbf/params/faults.py)
+    missed_scans: int = 0
     mode_history: list = field(default_factory=list)   # [(t, mode)] at each change
     perception: str = "lidar"
     warnings: dict = field(default_factory=dict)
@@ -135,7 +140,8 @@ class Episode:
         self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
                                 [p.start_time_s for p in peds], [p.radius_m for p in peds],
                                 [p.loop for p in peds], [p.reactive for p in peds],
-                                params=pedestrian_params, robot_radius=params.uncertainty.r_robot_m)
+                                params=pedestrian_params, robot_radius=params.uncertainty.r_robot_m,
+                                stops=[p.stop for p in peds], turns=[p.turn for p in peds], seed=self.seed)
         m = self.world.model
         import mujoco
         self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")] for p in peds]
@@ -196,6 +202,7 @@ class Episode:
         self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
         self._e_cbf_inf = 0.0
         self._faults, self._is_stopped = 0, False
+        self._missed_scans = 0
         self._margins_img: list[np.ndarray] = []
         self._margins_exec: list[np.ndarray] = []
         self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
@@ -219,11 +226,15 @@ class Episode:
                 return
             if k % self._sps == 0 and self._scanned != k:
                 self._scanned = k
-                self._scan = w.scan()
-                t0 = time.perf_counter()
-                self._obstacles = self._estimate(self._scan, w.odom())
-                self._percep_ms.append(1e3 * (time.perf_counter() - t0))
-                self._scan_t = w.t
+                scan = w.scan()
+                if scan is not None:         # None: the scan never arrived (a fault); the estimates age
+                    self._scan = scan
+                    t0 = time.perf_counter()
+                    self._obstacles = self._estimate(scan, w.odom())
+                    self._percep_ms.append(1e3 * (time.perf_counter() - t0))
+                    self._scan_t = w.t
+                else:
+                    self._missed_scans += 1
             if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
                 if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= self.params.eps_g_m:
@@ -239,12 +250,20 @@ class Episode:
         return self._scan
 
     def obstacles_now(self) -> Obstacles:
-        """The estimates at the pending control tick: up to one scan old, advanced to now with their velocity
-        (Eq. (2))."""
+        """The estimates at the pending control tick, advanced to now with their velocity (Eq. (2),
+        ``eq:obs_prop``). They are up to one scan period old; when scans went missing (a LiDAR fault), older: then
+        the age beyond one scan period also grows their covariance as the prediction does, Sigma + q_Sigma,i (age -
+        T_scan) I (Eq. (3), ``eq:cov_prop``; q_Sigma,i of ``prediction.q_sigma_for``). Within one scan period the
+        covariance is the perception's (the sensor's normal rate). docs/fidelity.md: "Missing scans"."""
         obstacles, age = self._obstacles, self.world.t - self._scan_t
         if age <= 0 or len(obstacles) == 0:
             return obstacles
-        return Obstacles(obstacles.p + age * obstacles.v, obstacles.v, obstacles.cov, obstacles.r, obstacles.static,
+        cov = obstacles.cov
+        stale = age - 1.0 / self.world.lidar.config.rate_hz
+        if stale > 1e-9:
+            q = q_sigma_for(obstacles, self.params.uncertainty)
+            cov = cov + (stale * q)[:, None, None] * np.eye(2)[None, :, :]
+        return Obstacles(obstacles.p + age * obstacles.v, obstacles.v, cov, obstacles.r, obstacles.static,
                          obstacles.ids)
 
     def act(self, u_in=None) -> StepRecord | None:
@@ -321,7 +340,7 @@ class Episode:
             perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
             final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
-            perception_faults=self._faults, mode_history=list(self._modes), perception=self.perception_mode,
+            perception_faults=self._faults, missed_scans=self._missed_scans, mode_history=list(self._modes), perception=self.perception_mode,
             warnings=w.warnings(),
             **self._live.metrics(self._modes, w.t),
             e_cbf_infeasible=self._e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
@@ -344,4 +363,4 @@ DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearanc
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
                       "perception_faults", "mode_history", "mode_switches_per_min", "side_reversals",
                       "lateral_reversals", "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
-                      "m_exec_mean_m", "m_exec_p90_m")
+                      "m_exec_mean_m", "m_exec_p90_m", "missed_scans")

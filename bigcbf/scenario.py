@@ -12,8 +12,19 @@ random range that each seed draws from:
     start_time_s = { choice = [0.0, 1.5] }    # one of the values
 
 Draws are made in the file's order from a generator seeded by (seed, scenario name) only, so every method sees the
-same world for the same seed ("paired" episodes). Unknown keys and bad values raise UserError naming the file and
-the field (e.g. ``pedestrians[1].speed_mps``).
+same world for the same seed ("paired" episodes). ``draws_as = "NAME"`` seeds them with another name instead: a
+variant of a scene (the ``faults`` bench suite's files) then draws the same worlds as the scene, provided its
+ranges come in the same order. Unknown keys and bad values raise UserError naming the file and the field (e.g.
+``pedestrians[1].speed_mps``).
+
+Faults (every one off by default; keys, units and ranges in ``bigcbf/params/faults.py``): robot and sensor faults
+in the robot profile's ``[faults]``, ``[lidar]``, ``[odometry]`` and ``[imu]`` tables (a scenario sets them in
+``[robot_profile.faults]`` etc.), and per pedestrian sudden stops and turns::
+
+    [[pedestrians]]
+    ...
+    stop = { times_s = [4.0], duration_s = 2.0 }          # and/or rate_per_s: random stops, Poisson
+    turn = { rate_per_s = 0.1, duration_s = 1.5, angle_deg = 180.0 }   # 180: turns back; random_side = true
 
 Limits (documented caps, so that no file can hang or crash the simulator): ``time_limit_s`` <= 600 s; every
 coordinate within +-1000 m (``WORLD_LIMIT_M``) and ``extent_m`` in (0, 1000]; sizes > 0 and at most 1000 m;
@@ -38,6 +49,7 @@ import numpy as np
 
 from . import PROFILES, SCENARIOS
 from .errors import FieldError, UserError
+from .params.faults import EventSchedule, PedestrianTurn
 from .params.robot import RobotProfile, merge_tables
 from .params.toml_io import from_dict, load_toml, parse_toml
 from .sim.scene import Box, Cylinder, FloorPatch, PedestrianBody, SceneSpec, Wall
@@ -134,6 +146,8 @@ class PedestrianSpec:
     radius_m: float = 0.25
     loop: bool = False                       # back to the first waypoint after the last (else stop there)
     reactive: bool = True                    # avoids the robot (social force); False: ignores it
+    stop: EventSchedule = EventSchedule()   # sudden stops (bigcbf/params/faults.py); none by default
+    turn: PedestrianTurn = PedestrianTurn()  # sudden turns / reversals; none by default
 
     def __post_init__(self):
         if not 2 <= len(self.waypoints) <= MAX_WAYPOINTS:
@@ -331,13 +345,16 @@ def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_te
     name = raw.get("name", path.stem)
     if not isinstance(name, str):
         raise UserError("expected a string", file=str(path), field="name")
+    draws_as = raw.pop("draws_as", name)
+    if not isinstance(draws_as, str) or not draws_as:
+        raise UserError("expected a scenario name (a non-empty string)", file=str(path), field="draws_as")
     base_ref = raw.pop("robot_profile_base", DEFAULT_ROBOT_PROFILE)
     if not isinstance(base_ref, str):
         raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),
                         field="robot_profile_base")
     base_path = robot_profile_path(base_ref, path) if robot_profile_text is None else Path(base_ref)
     base = robot_profile_table(base_path, robot_profile_text)
-    data = _resolve(raw, scenario_rng(name, seed), str(path), "")
+    data = _resolve(raw, scenario_rng(draws_as, seed), str(path), "")
     data.setdefault("name", name)
     over = data.get("robot_profile", {})
     if not isinstance(over, dict):

@@ -550,6 +550,11 @@ def _write_toml(path: Path, doc: dict) -> bool:
     return True
 
 
+#: the robot profile's fault keys (bigcbf/params/faults.py), with events early enough to happen in the fuzz's steps
+FAULTS_TABLE = {"scan_dropout": {"times_s": [0.0], "rate_per_s": 5.0, "duration_s": 0.1},
+                "latency_spikes": {"times_s": [0.05], "rate_per_s": 5.0, "duration_s": 0.1},
+                "blanked_sectors_deg": [[0.0, 30.0], [120.0, 45.0]]}
+
 BASE_SCENARIO = {
     "name": "fz", "description": "fuzz", "time_limit_s": 10.0, "extent_m": 5.0,
     "robot": {"start": [0.0, 0.0, 0.0], "goal": [5.0, 0.0]},
@@ -557,9 +562,11 @@ BASE_SCENARIO = {
     "boxes": [{"center": [2.5, -1.0], "half_size": [0.3, 0.2], "yaw_rad": 0.3}],
     "cylinders": [{"center": [3.5, 0.8], "radius_m": {"uniform": [0.15, 0.3]}}],
     "pedestrians": [{"name": "a", "waypoints": [[4.0, -3.0], [4.0, 3.0]], "speed_mps": {"uniform": [0.8, 1.2]},
-                     "start_time_s": 1.0}],
+                     "start_time_s": 1.0, "stop": {"times_s": [0.05], "rate_per_s": 2.0, "duration_s": 0.05},
+                     "turn": {"rate_per_s": 5.0, "duration_s": 0.02, "angle_deg": 90.0, "random_side": True}}],
     "floor_patches": [{"center": [1.0, 0.0], "half_size": [0.5, 0.5], "friction": 0.4}],
-    "robot_profile": {"latency_s": 0.05},
+    "draws_as": "other",
+    "robot_profile": {"latency_s": 0.05, "faults": FAULTS_TABLE},
 }
 
 
@@ -588,6 +595,19 @@ def test_random_scenario_files(tmp_path):
             world.command((0.3, 0.0, 0.0))
             world.step(50)
             world.scan()
+            world.command((0.3, 0.0, 0.0))
+            world.step(50)
+            world.scan()
+            if sc.pedestrians:          # the pedestrians' stops and turns
+                from bigcbf.sim.pedestrians import Pedestrians
+                peds = Pedestrians([p.waypoints for p in sc.pedestrians], [p.speed_mps for p in sc.pedestrians],
+                                   [p.start_time_s for p in sc.pedestrians], [p.radius_m for p in sc.pedestrians],
+                                   [p.loop for p in sc.pedestrians], [p.reactive for p in sc.pedestrians],
+                                   stops=[p.stop for p in sc.pedestrians], turns=[p.turn for p in sc.pedestrians],
+                                   seed=seed)
+                for k in range(20):
+                    peds.step(1.0 + 0.02 * k, 0.02)
+                assert np.isfinite(peds.p).all()
             counts["loaded"] += 1
 
     check()
@@ -661,7 +681,12 @@ def test_random_robot_profiles_and_perception_params(tmp_path):
     counts = {"robot": 0, "perception": 0, "refused": 0}
     robot_base = {"latency_s": 0.05, "latency_jitter_s": 0.01, "gain": [[0.9, 0, 0], [0, 0.9, 0], [0, 0, 1.0]],
                   "bias": [0.01, 0.0, 0.0], "residual_max": [0.02, 0.02, 0.05], "residual_hold_s": 0.05,
-                  "floor_friction": 0.8}
+                  "floor_friction": 0.8,
+                  "odometry": {"encoder_counts_per_rev": 1320, "scale_error": 0.05,
+                               "wheel_noise_density_radps_rthz": 0.1},
+                  "imu": {"gyro_noise_density_radps_rthz": 1e-3, "gyro_bias_max_radps": 1e-3,
+                          "gyro_bias_radps": 0.01},
+                  "faults": FAULTS_TABLE}
 
     @settings(max_examples=50, deadline=None, derandomize=True, database=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -677,8 +702,12 @@ def test_random_robot_profiles_and_perception_params(tmp_path):
                 else:
                     w = SimWorld(open_room(3.0), profile=profile, model=None if profile.floor_friction else
                                  world0.model)
-                    w.command((0.3, 0.1, 0.2))
-                    w.step(100)
+                    for _ in range(3):
+                        w.command((0.3, 0.1, 0.2))
+                        w.step(50)
+                        got = w.scan()
+                        assert got is None or len(got.ranges) == profile.lidar.n_beams
+                    assert np.isfinite(w.odom().px)
                     counts["robot"] += 1
             try:
                 pp = from_dict(PerceptionParams, perception_doc, file=str(path))

@@ -79,7 +79,9 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
                                         f"(|p| = {reach:.2f} m, seed {seed}); no log written: is the robot profile "
                                         "within the documented ranges (bigcbf/params/robot.py)?", file=str(out))
                 if k % SCAN_EVERY == 0:
-                    w.scan(t, world.scan())
+                    scan = world.scan()      # None: the profile's scan dropout lost it (nothing is logged)
+                    if scan is not None:
+                        w.scan(t, scan)
                 if k % CMD_EVERY == 0:
                     o = world.odom()
                     u = drive.command(t, (o.px, o.py, o.theta))

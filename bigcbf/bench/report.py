@@ -15,6 +15,9 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``m_img_mean_m``, ``m_img_p90_m``, ``m_exec_mean_m``, ``m_exec_p90_m``: the margins kappa_l m_i (Eq. 14) of each
   layer: the mean over episodes of each episode's mean and of each episode's 90th percentile (episode metrics of
   the same names; the imagination's only for methods that imagine, ``None`` otherwise).
+- ``goal_error_m``: mean over the successful episodes of the true distance to the goal at the end (success is judged
+  on the robot's own odometry, as in the paper; an odometry fault makes the two differ).
+- ``missed_scans``: mean over episodes of the LiDAR scans that never arrived (a scan-dropout fault).
 - ``collisions``, ``timeouts``: counts.
 - ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
   (wall-clock figures: they depend on the machine and its load, unlike every other number here).
@@ -25,7 +28,9 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 
 Suites with splits and families (``generated``) also get ``by_family``: the same figures per method, split and
 family (and over each split, key ``all``), a success table per family in summary.md and a heatmap of method x
-family and split instead of method x scenario.
+family and split instead of method x scenario. The ``faults`` suite (family: the fault, split: its level) also gets
+``by_fault`` (``bigcbf/bench/faults.py``): per fault, level (``none``: its scenes without the fault) and method the
+same figures, and in summary.md collisions and success per method and fault, then a table per fault.
 """
 from __future__ import annotations
 
@@ -66,6 +71,8 @@ def summarize(rows: Iterable[dict]) -> dict:
         "errors": len(rows) - n,
         "success_pct": 100.0 * sum(bool(m["success"]) for m in ok) / n if n else None,
         "time_s": _mean([m["time_s"] for m in ok if m["success"]]),
+        "goal_error_m": _mean([m["final_goal_dist_m"] for m in ok if m["success"]]),
+        "missed_scans": _mean([m.get("missed_scans") for m in ok]),
         "min_clearance_m": _mean([m["min_clearance_m"] for m in ok]),
         "e_cbf": _mean([m["e_cbf"] for m in ok]),
         "cbf_active_pct": 100.0 * active / steps if steps else None,
@@ -137,6 +144,9 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
     if groups:
         groups = {s: g for s, g in groups.items() if s in scenarios}
         extra = {"groups": groups, "by_family": by_family(rows, methods, scenarios, groups)}
+        from .faults import FAULTS, by_fault
+        if any(g["family"] in FAULTS for g in groups.values()):      # the faults suite (or some of its files)
+            extra["by_fault"] = by_fault(rows, methods, groups)
     return {
         "bench": {**(info or {}), "methods": list(methods), "scenarios": list(scenarios), "seeds": list(seeds),
                   "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),
@@ -251,8 +261,8 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
               "and obstacles at each selection (NoShared: its fixed margin), execution over the CBF rows at each "
               "control step.", ""]
     fam = summary.get("by_family")
-    if fam:     # procedural worlds: the paper's tables are about its own scenes, not these
-        lines += _family_sections(summary, h)
+    if fam:     # procedural worlds and faults: the paper's tables are about its own scenes, not these
+        lines += _fault_sections(summary, h) if summary.get("by_fault") else _family_sections(summary, h)
         lines += [f"![success rate per method, family and split]({image_dir}success_heatmap.png)", "",
                   f"![CBF burden per method]({image_dir}cbf_burden.png)", ""]
         return _errors_section(summary, h, lines)
@@ -378,6 +388,52 @@ def _family_sections(summary: dict, h: str) -> list[str]:
     return lines
 
 
+def _fault_sections(summary: dict, h: str) -> list[str]:
+    """The faults suite: collisions and success per method and fault (levels none / mild / severe), then one table
+    per fault with every level."""
+    bf = summary["by_fault"]
+    methods = summary["bench"]["methods"]
+    faults = list(bf)
+    n_seeds = len(summary["bench"]["seeds"])
+
+    def cells(key, digits=None):
+        out = []
+        for m in methods:
+            row = [display(m)]
+            for f in faults:
+                vals = [bf[f]["levels"][lv][m][key] for lv in bf[f]["levels"]]
+                row.append(" / ".join(_f(v) if digits is None else _f(v, digits) for v in vals))
+            out.append(row)
+        return out
+    levels = " / ".join(next(iter(bf.values()))["levels"]) if bf else ""
+    lines = [f"{h}# Collisions per method and fault ({levels})", "",
+             f"Each fault on its scenes ({n_seeds} seed{'s' if n_seeds != 1 else ''} each; the same worlds at every "
+             "level: level none is the shipped scene itself). Faults and levels: bigcbf/bench/faults.py and the "
+             "tables below.", ""]
+    lines += _table(["Method"] + faults, cells("collisions"))
+    lines += ["", f"{h}# Success per method and fault (%, {levels})", ""]
+    lines += _table(["Method"] + faults, cells("success_pct", 0))
+    for f in faults:
+        d = bf[f]
+        lines += ["", f"{h}# Fault {f}: {d['description']}", "",
+                  f"Scenes: {', '.join(s.replace('_', ' ') for s in d['scenes'])}. "
+                  + " ".join(f"{lv}: {txt}." for lv, txt in d["levels_described"].items()), ""]
+        head = ["Method", "Level", "Episodes", "Success (%)", "Collisions", "Timeouts", "Time (s)", "Clearance (m)",
+                "Goal error (m)", "QP infeas. (%)", "Missed scans"]
+        body = []
+        for m in methods:
+            for lv, per_m in d["levels"].items():
+                s = per_m[m]
+                body.append([display(m), lv, str(s["ok"]), _f(s["success_pct"], 1), _f(s["collisions"]),
+                             _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["min_clearance_m"]), _f(s["goal_error_m"]),
+                             _f(s["qp_infeasible_pct"]), _f(s["missed_scans"], 1)])
+        lines += _table(head, body, align="ll" + "r" * (len(head) - 2))
+    lines += ["", "Clearance: mean over episodes of the minimum true clearance. Goal error: the true distance to the "
+              "goal at the end of the successful episodes (success is judged on the robot's odometry). Missed "
+              "scans: LiDAR scans that never arrived, mean per episode.", ""]
+    return lines
+
+
 # --- figures -------------------------------------------------------------------------------------------------------
 
 def plot_heatmap(summary: dict, path: Path) -> None:
@@ -408,7 +464,10 @@ def plot_heatmap(summary: dict, path: Path) -> None:
     ax.set_yticks(range(len(methods)), [display(m) for m in methods], fontsize=9)
     ax.tick_params(length=0)
     n = len(summary["bench"]["seeds"])
-    if fam:
+    if summary.get("by_fault"):
+        ax.set_title(f"Success rate (%) per method, fault and level (none: without the fault)\n({n} "
+                     f"seed{'s' if n != 1 else ''} per scene, paired)", fontsize=10)
+    elif fam:
         ax.set_title(f"Success rate (%) per method, family and split\n({n} seed{'s' if n != 1 else ''} per world, "
                      "paired)", fontsize=10)
     else:

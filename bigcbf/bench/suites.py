@@ -19,7 +19,8 @@ from ..registry import Registry
 @dataclass(frozen=True)
 class SuiteEntry:
     """One scenario of a suite: a shipped scenario's name or a TOML path, and (generated suites) its split and
-    family, used to report dev and test splits and success per family separately."""
+    family, used to report dev and test splits and success per family separately (the faults suite: the fault is
+    the family and its level the split)."""
 
     scenario: str
     split: str = ""
@@ -60,6 +61,8 @@ def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
 SUITES.register("generated", Suite(
     "generated", "procedural worlds (bigcbf/worlds.py): 6 families x (30 dev + 30 test) worlds, written to "
     "DIR/worlds/, one seed each", _generated, default_seeds=1, splits=("dev", "test")))
+
+
 def _hardware(out: Path) -> list[SuiteEntry]:
     from .paper import HARDWARE_SCENARIO_ORDER
     return [SuiteEntry(name) for name in HARDWARE_SCENARIO_ORDER]
@@ -76,3 +79,15 @@ def _hardware_params():
 SUITES.register("hardware", Suite(
     "hardware", "the paper's three hardware scenes (Sec. V, Table III) at a lab's scale, with the physical preset "
     "and a real X3-class robot profile", _hardware, default_seeds=20, params=_hardware_params))
+
+
+def _faults(out: Path, split: str | None = None) -> list[SuiteEntry]:
+    from .faults import _suite_entries
+    return _suite_entries(out, split)
+
+
+SUITES.register("faults", Suite(
+    "faults", "every method under LiDAR noise, scan dropout, a blanked sector, latency spikes, odometry drift, "
+    "pedestrians that stop or turn (bigcbf/bench/faults.py), mild and severe, on shipped scenes where each matters, "
+    "beside the same scenes without the fault; files written to DIR/faults/", _faults, default_seeds=5,
+    splits=("none", "mild", "severe")))

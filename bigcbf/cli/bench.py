@@ -17,12 +17,14 @@ def add_arguments(p):
                    help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
                         "every worker; default: every registered method)")
     p.add_argument("--suite", default="paper", metavar="NAME",
-                   help="the scenarios of a named suite: paper (default; the nine of Table II, 50 seeds) or hardware "
-                        "(the three lab scenes of Table III, 20 seeds, the physical preset)")
+                   help="the scenarios of a named suite: paper (default; the nine of Table II, 50 seeds), hardware "
+                        "(the three lab scenes of Table III, 20 seeds, the physical preset), generated (procedural "
+                        "worlds) or faults (every fault, mild and severe, on shipped scenes, 5 seeds)")
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
                    help="scenario names or .toml files instead of the suite's")
     p.add_argument("--split", default=None, metavar="NAME",
-                   help="only the suite's scenarios of this split (generated: dev or test; default: all)")
+                   help="only the suite's scenarios of this split (generated: dev or test; faults: none, mild or "
+                        "severe; default: all)")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
                        help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper; at most "

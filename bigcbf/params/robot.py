@@ -25,11 +25,22 @@ A TOML robot profile (all keys optional; the defaults of the dataclasses are an 
 
     [odometry]                       # wheel odometry (encoders)
     encoder_counts_per_rev = 1320    # counts per wheel revolution (0: exact wheel angles)
-    scale_error = 0.01               # the odometry's wheel radius is off by this fraction [-]
+    scale_error = 0.01               # bias: the odometry's wheel radius is off by this fraction [-]
+    wheel_noise_density_radps_rthz = 0.0   # noise: white noise on each wheel's measured speed [rad/s/sqrt(Hz)]
 
     [imu]                            # the gyro whose yaw rate the odometry uses for the heading
-    gyro_noise_density_radps_rthz = 1.75e-4   # white rate noise [rad/s/sqrt(Hz)]
-    gyro_bias_max_radps = 8.7e-4     # residual bias after start-up calibration, uniform in [-max, max] per episode
+    gyro_noise_density_radps_rthz = 1.75e-4   # noise: white rate noise [rad/s/sqrt(Hz)]
+    gyro_bias_max_radps = 8.7e-4     # bias: residual bias after start-up calibration, uniform in [-max, max] per
+                                     # episode [rad/s]
+    gyro_bias_radps = 0.0            # bias: a fixed bias on top of it (the heading drifts by this rate) [rad/s]
+
+    [faults]                         # LiDAR dropout and blanked sectors, command latency spikes: every fault off by
+                                     # default; keys, units and ranges in bigcbf/params/faults.py
+    blanked_sectors_deg = []
+    [faults.scan_dropout]
+    rate_per_s = 0.0
+    [faults.latency_spikes]
+    rate_per_s = 0.0
 
 The executed body twist is ``A u + d + r + s`` (paper Eq. (1), with A extended to 3x3 to cover yaw rate; ``s`` the
 lateral slip, perpendicular to the commanded translation), applied ``latency`` after the command was issued; the
@@ -47,6 +58,7 @@ Documented ranges (the calibration drive, ``bigcbf record calibration``, is chec
 latency_jitter_s 0-0.05, gain diagonal 0.7-1.2 with off-diagonal terms within +-0.1, bias within +-0.05 m/s
 (vx, vy) and +-0.1 rad/s (wz), residual_max up to 0.05, floor_friction 0.3-2, wheel_speed_max_mps 0.3-1.2,
 wheel_accel_max_mps2 0.5-10.
+Faults (``[faults]``, ``bigcbf.params.faults``) are part of the profile too, each with its own stream.
 
 The simulated X3 used by every scenario by default is ``bigcbf/profiles/x3_sim.toml`` (its comments give the
 source of every value); scenario files override its keys in a ``[robot_profile]`` table.
@@ -55,6 +67,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+from .faults import RobotFaults
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
@@ -97,29 +111,44 @@ class LidarModel:
 
 @dataclass(frozen=True)
 class OdometryModel:
-    """Wheel odometry from quantized encoder counts, with a wheel-radius (scale) error."""
+    """Wheel odometry from quantized encoder counts, with a wheel-radius (scale) error (a bias: the odometry's
+    distances are (1 + scale_error) x the true ones) and white noise on each wheel's measured speed (density in
+    rad/s/sqrt(Hz): a speed averaged over dt has standard deviation density / sqrt(dt), so the wheel angle the
+    odometry integrates random-walks with standard deviation density sqrt(t), whatever the integration step; wheel
+    slip on the floor beyond the physics')."""
 
     encoder_counts_per_rev: int = 0     # encoder counts per wheel revolution; 0 = exact wheel angles [-]
     scale_error: float = 0.0            # odometry speeds are (1 + scale_error) x the wheels' true ones [-]
+    wheel_noise_density_radps_rthz: float = 0.0   # white noise on each wheel's measured speed [rad/s/sqrt(Hz)]
 
     def __post_init__(self):
         if self.encoder_counts_per_rev < 0:
             raise ValueError("encoder_counts_per_rev must be >= 0")
         if not (math.isfinite(self.scale_error) and -0.5 < self.scale_error < 0.5):
             raise ValueError("scale_error must be in (-0.5, 0.5)")
+        _nonneg(self, "wheel_noise_density_radps_rthz")
+        if self.wheel_noise_density_radps_rthz > 10.0:
+            raise ValueError("wheel_noise_density_radps_rthz must be <= 10 rad/s/sqrt(Hz)")
 
 
 @dataclass(frozen=True)
 class ImuModel:
     """The gyro's yaw rate: true rate + bias + white noise (noise density in rad/s/sqrt(Hz), so a reading averaged
-    over dt has standard deviation density / sqrt(dt)); the bias is drawn once per episode, uniform in
-    [-gyro_bias_max_radps, gyro_bias_max_radps] (what is left after the start-up calibration)."""
+    over dt has standard deviation density / sqrt(dt)); the bias is ``gyro_bias_radps`` (fixed: the heading
+    drifts at that rate) plus a draw once per episode, uniform in [-gyro_bias_max_radps, gyro_bias_max_radps]
+    (what is left after the start-up calibration)."""
 
     gyro_noise_density_radps_rthz: float = 0.0   # white rate-noise density [rad/s/sqrt(Hz)]
-    gyro_bias_max_radps: float = 0.0              # bound of the residual bias [rad/s]
+    gyro_bias_max_radps: float = 0.0              # bound of the residual bias drawn per episode [rad/s]
+    gyro_bias_radps: float = 0.0                  # fixed bias [rad/s]
 
     def __post_init__(self):
         _nonneg(self, "gyro_noise_density_radps_rthz", "gyro_bias_max_radps")
+        for name in ("gyro_noise_density_radps_rthz", "gyro_bias_max_radps"):
+            if getattr(self, name) > 1.0:
+                raise ValueError(f"{name} must be <= 1 (rad/s)")
+        if not (math.isfinite(self.gyro_bias_radps) and abs(self.gyro_bias_radps) <= 1.0):
+            raise ValueError("gyro_bias_radps must be in [-1, 1] rad/s")
 
 
 @dataclass(frozen=True)
@@ -141,6 +170,7 @@ class RobotProfile:
     wheel_speed_max_mps: float | None = None
     wheel_accel_max_mps2: float | None = None
     wheel_yaw_lever_m: float | None = None
+    faults: RobotFaults = field(default_factory=RobotFaults)
 
     def __post_init__(self):
         if self.latency_s < 0 or self.latency_jitter_s < 0:

@@ -4,7 +4,9 @@ encoder and gyro models the odometry reads.
 No MuJoCo here. The hardware-imperfection layer realises paper Eq. (1) on the simulated robot: the body twist
 actually sent to the wheels is ``A u + d + r + s`` (A 3x3, bias d, bounded residual r, lateral slip s), applied
 after a latency ``latency_s + U(0, latency_jitter_s)``; commands never overtake one another (a FIFO, like a serial
-link). The residual, the jitter and the slip each draw from their own random stream.
+link). The residual, the jitter and the slip each draw from their own random stream. Latency spikes (the robot
+profile's ``[faults.latency_spikes]``, ``bigcbf/params/faults.py``): the link stalls during each event, and a command
+issued then leaves when the stall ends (and then takes its latency).
 Then, when the profile has wheel limits, :class:`WheelLimiter` saturates the wheel speeds and limits their
 acceleration, as a base's firmware does (Eq. (1) holds only below those limits).
 """
@@ -17,6 +19,7 @@ import numpy as np
 
 from ..params.robot import ImuModel, OdometryModel, RobotProfile
 from ..types import RobotState
+from .faults import EventProcess
 from .kinematics import MecanumKinematics
 
 
@@ -24,12 +27,16 @@ class ImperfectionLayer:
     """Eq. (1) plus latency: turns issued commands into executed body twists, in time order."""
 
     def __init__(self, profile: RobotProfile, rng: np.random.Generator, rng_jitter: np.random.Generator | None = None,
-                 rng_slip: np.random.Generator | None = None, lever_m: float | None = None):
+                 rng_slip: np.random.Generator | None = None, lever_m: float | None = None,
+                 rng_spikes: np.random.Generator | None = None):
         """``lever_m``: the wheel limits' default yaw lever arm (the kinematics' half wheelbase + half track)."""
         self.profile = profile
         self.rng = rng
         self.rng_jitter = rng if rng_jitter is None else rng_jitter
         self.rng_slip = rng if rng_slip is None else rng_slip
+        spikes = profile.faults.latency_spikes
+        self.spikes = (EventProcess(spikes, rng_spikes if rng_spikes is not None else np.random.default_rng(0))
+                       if spikes.enabled else None)
         self._slip = 0.0
         self._slip_until = -np.inf
         self._A = np.asarray(profile.gain, float)
@@ -64,11 +71,14 @@ class ImperfectionLayer:
         return out
 
     def submit(self, t: float, u) -> float:
-        """Issue command u at time t; returns the time at which the wheels will receive it."""
+        """Issue command u at time t; returns the time at which the wheels will receive it: t + the latency, or,
+        when a latency spike stalls the link at t, the end of the stall + the latency; never before the previous
+        command."""
         delay = self.profile.latency_s
         if self.profile.latency_jitter_s > 0:
             delay += self.rng_jitter.uniform(0.0, self.profile.latency_jitter_s)
-        apply_at = max(t + delay, self._last_apply)
+        sent = t if self.spikes is None else self.spikes.end_of_outage(t)
+        apply_at = max(sent + delay, self._last_apply)
         self._last_apply = apply_at
         self._queue.append((apply_at, self.executed_twist(t, u)))
         return apply_at
@@ -169,15 +179,21 @@ class WheelOdometry:
 
 class Encoders:
     """Quadrature wheel encoders: the wheels' angles counted in steps of 2 pi / encoder_counts_per_rev, speeds from
-    count differences, scaled by (1 + scale_error) (the odometry's wheel radius is off by that fraction).
+    count differences, scaled by (1 + scale_error) (the odometry's wheel radius is off by that fraction). With
+    ``wheel_noise_density_radps_rthz`` N > 0, each increment adds white noise of standard deviation N / sqrt(dt) to
+    every wheel's speed (drawn from ``rng``, the odometry's own stream) before it is counted.
 
     ``increment(w_mean, dt)`` -> the wheels' mean speeds over dt as the counts show them (the distance the
     odometry integrates is exact to one count); ``speed()`` -> the speeds over the last ``window_s`` (at least one
     block), what a firmware reports as the wheel speeds. With ``encoder_counts_per_rev = 0`` both are exact.
     """
 
-    def __init__(self, model: OdometryModel, n: int = 4, window_s: float = 0.01):
+    def __init__(self, model: OdometryModel, n: int = 4, window_s: float = 0.01,
+                 rng: np.random.Generator | None = None):
         self.model = model
+        self.noise_density = model.wheel_noise_density_radps_rthz
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.last_noise = np.zeros(n)
         self.quantum = 2 * math.pi / model.encoder_counts_per_rev if model.encoder_counts_per_rev else 0.0
         self.scale = 1.0 + model.scale_error
         self.window_s = window_s
@@ -192,6 +208,9 @@ class Encoders:
 
     def increment(self, w_mean, dt: float) -> np.ndarray:
         w_mean = np.asarray(w_mean, float)
+        if self.noise_density > 0:
+            self.last_noise = self.rng.standard_normal(len(self.angle)) * (self.noise_density / math.sqrt(dt))
+            w_mean = w_mean + self.last_noise
         if self.exact:
             return w_mean * self.scale if self.scale != 1.0 else w_mean
         self.angle += w_mean * dt
@@ -208,6 +227,8 @@ class Encoders:
         """The reported wheel speeds: exact encoders report the current speeds ``w_now``."""
         if self.exact:
             w = np.asarray(w_now, float)
+            if self.noise_density > 0:
+                w = w + self.last_noise
             return w * self.scale if self.scale != 1.0 else w
         (t0, c0), (t1, c1) = self._hist[0], self._hist[-1]
         return (c1 - c0) * (self.quantum / max(t1 - t0, 1e-9)) * self.scale
@@ -215,13 +236,16 @@ class Encoders:
 
 class Gyro:
     """The yaw-rate gyro: mean true rate over dt + bias + white noise of density N (std N / sqrt(dt)); the bias is
-    drawn once, uniform in [-gyro_bias_max_radps, gyro_bias_max_radps], from its own stream."""
+    gyro_bias_radps plus a draw made once, uniform in [-gyro_bias_max_radps, gyro_bias_max_radps], from its own
+    stream."""
 
     def __init__(self, model: ImuModel, rng_noise: np.random.Generator, rng_bias: np.random.Generator):
         self.model = model
         self.rng = rng_noise
         self.bias = (float(rng_bias.uniform(-model.gyro_bias_max_radps, model.gyro_bias_max_radps))
                      if model.gyro_bias_max_radps > 0 else 0.0)
+        if model.gyro_bias_radps:
+            self.bias += model.gyro_bias_radps
         self.last_noise = 0.0
 
     def measure(self, rate_mean: float, dt: float) -> float:

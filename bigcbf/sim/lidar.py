@@ -43,6 +43,7 @@ class Lidar:
         self.angle_increment = 2 * np.pi / n
         self.angle_min = -np.pi
         a = self.angle_min + self.angle_increment * np.arange(n)
+        self.angles = a                                     # beam angles in the laser frame [rad]
         self._local = np.stack([np.cos(a), np.sin(a), np.zeros(n)], axis=1)   # unit vectors in the laser frame
         self._vec = np.zeros(3 * n)
         self._geomid = np.zeros(n, dtype=np.int32)

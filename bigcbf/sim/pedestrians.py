@@ -10,6 +10,14 @@ w(phi) = lambda + (1 - lambda) (1 + cos phi) / 2 the anisotropy that lets people
 them. "Reactive" pedestrians also treat the robot (radius r_R, true position) as such a neighbour, with its own
 strength A_robot; non-reactive ones ignore it (they model people who do not see the robot). Speeds are capped at
 1.3 v0. Integrated by semi-implicit Euler (the episode steps it at 50 Hz); positions drive MuJoCo mocap bodies.
+
+Faults (the scenario's ``stop`` and ``turn`` keys of a pedestrian, ``bigcbf/params/faults.py``): during a stop event
+a walking pedestrian's preferred velocity is zero (it comes to a halt within about tau, as a person does, and the
+social forces still act on it); during a turn event its preferred direction is the direction it was heading for
+when the event began, rotated by ``angle_deg`` (each turn's side at random with ``random_side``), then it heads
+for its waypoint again. A stop overrides a turn. Each pedestrian's stops, turn times and turn sides draw from their
+own random streams (seeded by the episode seed, the pedestrian's index and the kind), so no fault changes
+another's draws, and with none set nothing is drawn.
 """
 from __future__ import annotations
 
@@ -18,6 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params.checks import check_ranges
+from ..params.faults import EventSchedule, PedestrianTurn
+from .faults import EventProcess
+
+#: first element of the spawn key of the pedestrians' fault streams (SimWorld's streams have keys (k,))
+FAULT_STREAM_KEY = 1000
 
 
 @dataclass(frozen=True)
@@ -39,7 +52,11 @@ class Pedestrians:
     """Vectorised state of K pedestrians. ``paths[k]`` is a (n_k, 2) array of waypoints."""
 
     def __init__(self, paths, speeds, start_times, radii, loop, reactive,
-                 params: SocialForceParams = SocialForceParams(), robot_radius: float = 0.15):
+                 params: SocialForceParams = SocialForceParams(), robot_radius: float = 0.15,
+                 stops: list[EventSchedule] | None = None, turns: list[PedestrianTurn] | None = None,
+                 seed: int = 0):
+        """``stops``, ``turns``: each pedestrian's fault schedules (None: none); ``seed``: the episode's seed, for
+        their random streams (module docstring)."""
         self.paths = [np.asarray(p, float).reshape(-1, 2) for p in paths]
         self.k = len(self.paths)
         self.v0 = np.asarray(speeds, float)
@@ -53,6 +70,24 @@ class Pedestrians:
         self.v = np.zeros((self.k, 2))
         self.target = np.ones(self.k, int)
         self.done = np.zeros(self.k, bool)
+        self._stops: list[EventProcess | None] = [None] * self.k
+        self._turns: list[EventProcess | None] = [None] * self.k
+        self._turn_spec = list(turns) if turns is not None else [None] * self.k
+        self._turn_key: list[float | None] = [None] * self.k
+        self._turn_dir = np.zeros((self.k, 2))
+        self._side_rng: list[np.random.Generator | None] = [None] * self.k
+
+        def stream(i: int, kind: int) -> np.random.Generator:
+            return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(FAULT_STREAM_KEY, i, kind)))
+
+        for i in range(self.k):
+            if stops is not None and stops[i].enabled:
+                self._stops[i] = EventProcess(stops[i], stream(i, 0))
+            if turns is not None and turns[i].enabled:
+                self._turns[i] = EventProcess(turns[i], stream(i, 1))
+                if turns[i].random_side:
+                    self._side_rng[i] = stream(i, 2)
+        self.faulty = any(x is not None for x in self._stops + self._turns)
 
     def _desired(self, t: float) -> np.ndarray:
         e = np.zeros((self.k, 2))
@@ -71,7 +106,35 @@ class Pedestrians:
                     continue
                 d = path[self.target[i]] - self.p[i]
             e[i] = d / max(np.linalg.norm(d), 1e-9)
+            if self.faulty:
+                e[i] = self._faulted(i, t, e[i])
         return e * self.v0[:, None]
+
+    def stopped(self, i: int, t: float) -> bool:
+        """Whether pedestrian i is in a stop event at t."""
+        return self._stops[i] is not None and self._stops[i].active(t)
+
+    def turning(self, i: int, t: float) -> bool:
+        """Whether pedestrian i is in a turn event at t."""
+        return self._turns[i] is not None and self._turns[i].active(t)
+
+    def _faulted(self, i: int, t: float, e: np.ndarray) -> np.ndarray:
+        """The preferred direction of walking pedestrian i under its stop and turn faults (module docstring)."""
+        if self.stopped(i, t):
+            return np.zeros(2)
+        turns = self._turns[i]
+        start = None if turns is None else turns.event_at(t)
+        if start is None:
+            return e
+        if self._turn_key[i] != start:          # a new turn: rotate the heading it had when it began
+            spec = self._turn_spec[i]
+            a = np.radians(spec.angle_deg)
+            if self._side_rng[i] is not None and self._side_rng[i].random() < 0.5:
+                a = -a
+            c, s = np.cos(a), np.sin(a)
+            self._turn_dir[i] = (c * e[0] - s * e[1], s * e[0] + c * e[1])
+            self._turn_key[i] = start
+        return self._turn_dir[i].copy()
 
     def _repulsion(self, q: np.ndarray, rq: np.ndarray, A: np.ndarray) -> np.ndarray:
         """Sum over neighbours at q (m,2) with radii rq and strengths A (k, m) of the anisotropic exponential."""

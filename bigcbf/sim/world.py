@@ -3,7 +3,7 @@
     world = SimWorld(open_room(), profile=RobotProfile(), seed=0)
     world.command((0.5, 0.0, 0.0))     # body twist issued now, through the imperfection layer
     world.advance(1.0)                 # physics at the model timestep (2 ms)
-    world.odom(), world.true_state(), world.imu(), world.scan()
+    world.odom(), world.true_state(), world.imu(), world.scan()   # scan(): None when a fault loses it
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import numpy as np
 
 from ..params.robot import RobotProfile
 from ..types import LaserScan, RobotState
+from .faults import LidarFaults
 from .firmware import Encoders, Gyro, ImperfectionLayer, WheelOdometry
 from .kinematics import MecanumKinematics
 from .lidar import Lidar, LidarConfig
@@ -31,9 +32,10 @@ def _yaw(quat_wxyz) -> float:
 class SimWorld:
     """One episode's physics. Deterministic for a given scene, profile, seed and command sequence."""
 
-    #: the random streams, one per noise source (SeedSequence children keep their index: adding a source at the end
-    #: changes none of the others)
-    STREAMS = ("residual", "lidar", "latency_jitter", "slip", "gyro_noise", "gyro_bias")
+    #: the random streams, one per noise source and fault (SeedSequence children keep their index: adding a source at
+    #: the end changes none of the others)
+    STREAMS = ("residual", "lidar", "latency_jitter", "slip", "gyro_noise", "gyro_bias", "scan_dropout",
+               "latency_spikes", "wheel_noise")
 
     def __init__(self, scene: SceneSpec | None = None, profile: RobotProfile = RobotProfile(), seed: int = 0,
                  lidar: LidarConfig | None = None, kinematics: MecanumKinematics = MecanumKinematics(),
@@ -51,11 +53,16 @@ class SimWorld:
         rng = dict(zip(self.STREAMS, (np.random.default_rng(s)
                                       for s in np.random.SeedSequence(seed).spawn(len(self.STREAMS)))))
         self.imperfection = ImperfectionLayer(profile, rng["residual"], rng["latency_jitter"], rng["slip"],
-                                              kinematics.half_wheelbase_m + kinematics.half_track_m)
+                                              kinematics.half_wheelbase_m + kinematics.half_track_m,
+                                              rng_spikes=rng["latency_spikes"])
         if lidar is None:
             lidar = LidarConfig.from_model(profile.lidar)
         self.lidar = Lidar(self.model, lidar, rng["lidar"])
-        self.encoders = Encoders(profile.odometry)
+        f = profile.faults
+        self.lidar_faults = (LidarFaults(f.scan_dropout, f.blanked_sectors_deg, rng["scan_dropout"],
+                                         self.lidar.angles) if f.scan_dropout.enabled or f.blanked_sectors_deg
+                             else None)
+        self.encoders = Encoders(profile.odometry, rng=rng["wheel_noise"])
         self.gyro = Gyro(profile.imu, rng["gyro_noise"], rng["gyro_bias"])
         m = self.model
         self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{w}_wheel") for w in WHEELS])
@@ -196,8 +203,17 @@ class SimWorld:
         from .scene import ROBOT_XML
         return ROBOT_XML.read_text()
 
-    def scan(self) -> LaserScan:
-        return self.lidar.scan(self.data, self.t)
+    def scan(self) -> LaserScan | None:
+        """The LiDAR scan now; None when the robot profile's scan dropout loses it (``[faults.scan_dropout]``);
+        blanked sectors (``faults.blanked_sectors_deg``) read inf. With scan dropout on, a lost scan still
+        draws its range noise, so the scans that arrive are those of the same episode without the fault."""
+        scan = self.lidar.scan(self.data, self.t)
+        lf = self.lidar_faults
+        if lf is None:
+            return scan
+        if lf.dropped(self.t):
+            return None
+        return lf.apply(scan)
 
     def warnings(self) -> dict[str, int]:
         """MuJoCo warnings raised so far (name -> count), empty when none."""
