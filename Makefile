@@ -7,6 +7,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SYSLIBS := libegl1 libopengl0 libgl1-mesa-dri libgomp1
 export MUJOCO_GL ?= egl
+# test processes (pytest-xdist): one per core
+TEST_WORKERS ?= auto
 
 .PHONY: demo test setup syslibs perf profiles clean wheel-check
 
@@ -34,7 +36,7 @@ demo: setup
 # summary last
 test: setup
 	@status=0; PY=$(PY) scripts/check_wheel.sh || status=1; \
-	$(PY) -m pytest -q -p no:cacheprovider || status=$$?; exit $$status
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) || status=$$?; exit $$status
 
 # build the wheel, install it into a fresh venv outside the checkout, run the tour's first commands from there
 wheel-check: setup
