@@ -23,7 +23,7 @@ from .control.methods import make_planner
 from .control.liveness import LivenessRecorder
 from .control.metrics import cbf_energy, margin_stats
 from .control.planner import PlanInfo
-from .control.prediction import q_sigma_for
+from .control.prediction import age_obstacles
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
@@ -250,21 +250,11 @@ class Episode:
         return self._scan
 
     def obstacles_now(self) -> Obstacles:
-        """The estimates at the pending control tick, advanced to now with their velocity (Eq. (2),
-        ``eq:obs_prop``). They are up to one scan period old; when scans went missing (a LiDAR fault), older: then
-        the age beyond one scan period also grows their covariance as the prediction does, Sigma + q_Sigma,i (age -
-        T_scan) I (Eq. (3), ``eq:cov_prop``; q_Sigma,i of ``prediction.q_sigma_for``). Within one scan period the
-        covariance is the perception's (the sensor's normal rate). docs/fidelity.md: "Missing scans"."""
-        obstacles, age = self._obstacles, self.world.t - self._scan_t
-        if age <= 0 or len(obstacles) == 0:
-            return obstacles
-        cov = obstacles.cov
-        stale = age - 1.0 / self.world.lidar.config.rate_hz
-        if stale > 1e-9:
-            q = q_sigma_for(obstacles, self.params.uncertainty)
-            cov = cov + (stale * q)[:, None, None] * np.eye(2)[None, :, :]
-        return Obstacles(obstacles.p + age * obstacles.v, obstacles.v, cov, obstacles.r, obstacles.static,
-                         obstacles.ids)
+        """The estimates at the pending control tick, aged to now (``prediction.age_obstacles``: moved with their
+        velocity, Eq. (2) ``eq:obs_prop``; when scans went missing, the covariance grown beyond one scan period,
+        Eq. (3) ``eq:cov_prop``)."""
+        return age_obstacles(self._obstacles, self.world.t - self._scan_t, 1.0 / self.world.lidar.config.rate_hz,
+                             self.params.uncertainty)
 
     def act(self, u_in=None) -> StepRecord | None:
         """One control period at the pending control tick: the planner's u_in (or the given one), the common CBF
