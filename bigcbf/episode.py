@@ -29,7 +29,7 @@ from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
 from .scenario import Scenario
 from .sim.lidar import LidarConfig
-from .sim.pedestrians import Pedestrians, SocialForceParams
+from .sim.pedestrians import SocialForceParams, WorldPedestrians
 from .sim.truth import GroundTruth
 from .sim.world import SimWorld
 from .types import Obstacles, RobotState
@@ -136,18 +136,10 @@ class Episode:
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
         self.truth = GroundTruth(self.world.model, self.world.scene)
-        peds = scenario.pedestrians
-        self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
-                                [p.start_time_s for p in peds], [p.radius_m for p in peds],
-                                [p.loop for p in peds], [p.reactive for p in peds],
-                                params=pedestrian_params, robot_radius=params.uncertainty.r_robot_m,
-                                stops=[p.stop for p in peds], turns=[p.turn for p in peds], seed=self.seed)
-        m = self.world.model
-        import mujoco
-        self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")] for p in peds]
-        self._ped_t, self._ped_next = 0.0, 0.0
-        self._move_pedestrians(self.world)
-        self.world.add_pre_step(self._move_pedestrians)
+        # the pedestrians walk in the world (their social-force model and mocap bodies: sim/pedestrians.py)
+        self.walkers = WorldPedestrians(self.world, scenario.pedestrians, pedestrian_params,
+                                        robot_radius=params.uncertainty.r_robot_m, seed=self.seed)
+        self.peds = self.walkers.pedestrians
         # method None: no planner, every act() gets its u_in from outside (EXTERNAL)
         self.planner = None if method is None else make_planner(method, params, method_params)
         if self.planner is not None:
@@ -157,28 +149,10 @@ class Episode:
         self.goal = scenario.goal
         self.observers: list[Callable[[StepRecord], None]] = []
 
-    #: the social-force model runs at 50 Hz (its relaxation time is 0.5 s); between its updates the mocap bodies
-    #: move on at the pedestrians' velocities, so their motion in the physics stays smooth
-    PEDESTRIAN_PERIOD_S = 0.02
-
-    def _move_pedestrians(self, world: SimWorld) -> None:
-        """Before each physics block: the social-force step when due, and the mocap bodies moved to where the
-        pedestrians are now (extrapolated at their velocities between social-force steps)."""
-        if not self._mocap:
-            return
-        t = world.t
-        if t >= self._ped_next - 1e-9:
-            self.peds.step(t, self.PEDESTRIAN_PERIOD_S, robot_xy=tuple(world.data.qpos[0:2]))
-            self._ped_t, self._ped_next = t, t + self.PEDESTRIAN_PERIOD_S
-        world.data.mocap_pos[self._mocap, :2] = self.peds.p + (t - self._ped_t) * self.peds.v
-
-    def _ped_positions(self) -> np.ndarray:
-        return self.world.data.mocap_pos[self._mocap, :2] if self._mocap else np.zeros((0, 2))
-
     def _estimate(self, scan, odom: RobotState) -> Obstacles:
         if self.perception_mode == "truth":
             ts = self.world.true_state()
-            return self.truth.obstacles((ts.px, ts.py), self._ped_positions(), self.peds.v)
+            return self.truth.obstacles((ts.px, ts.py), self.walkers.positions(), self.walkers.velocities)
         return self.perception.update(scan, (odom.px, odom.py, odom.theta))
 
     # --- the loop, one control period at a time ------------------------------------------------------------
@@ -309,7 +283,7 @@ class Episode:
             if self._is_stopped:
                 self._stopped += nb * w.dt
             self._min_clear = min(self._min_clear,
-                                  self.truth.clearance(w.pose(), self._ped_positions(), self._min_clear))
+                                  self.truth.clearance(w.pose(), self.walkers.positions(), self._min_clear))
             self._collision = self.truth.in_contact(w.data)
         if self._collision:
             self.done = True
