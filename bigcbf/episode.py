@@ -18,10 +18,9 @@ from typing import Callable
 
 import numpy as np
 
-from .control.cbf import PERCEPTION_FAULT, CbfFilter
+from .control.cbf import CbfFilter
 from .control.methods import make_planner
-from .control.liveness import LivenessRecorder
-from .control.metrics import cbf_energy, margin_stats
+from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
 from .control.prediction import age_obstacles
 from .params.perception import PerceptionParams
@@ -173,16 +172,7 @@ class Episode:
         self._sps = int(round(1.0 / w.lidar.config.rate_hz / w.dt))           # physics steps per scan
         self._limit = int(round(self.time_limit_s / w.dt))
         self._k = 0
-        self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
-        self._e_cbf_inf = 0.0
-        self._faults, self._is_stopped = 0, False
-        self._missed_scans = 0
-        self._margins_img: list[np.ndarray] = []
-        self._margins_exec: list[np.ndarray] = []
-        self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
-        self._modes: list[tuple[float, str]] = []
-        self._live = LivenessRecorder(self.params.T_C_s)
-        self._min_clear = np.inf
+        self.metrics = EpisodeMetrics.for_params(self.params)     # every metric of the episode goes through it
         self._collision = self._success = False
         self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
         self.state: RobotState | None = None       # the stack's state at the pending control tick
@@ -205,10 +195,10 @@ class Episode:
                     self._scan = scan
                     t0 = time.perf_counter()
                     self._obstacles = self._estimate(scan, w.odom())
-                    self._percep_ms.append(1e3 * (time.perf_counter() - t0))
+                    self.metrics.scan(1e3 * (time.perf_counter() - t0))
                     self._scan_t = w.t
                 else:
-                    self._missed_scans += 1
+                    self.metrics.scan(None)
             if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
                 if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= self.params.eps_g_m:
@@ -235,7 +225,7 @@ class Episode:
         filter, the command; then physics up to the next control tick. Returns what the step did."""
         if self.done:
             raise RuntimeError("the episode is over")
-        p, w, state = self.params, self.world, self.state
+        w, state = self.world, self.state
         obs_now = self.obstacles_now()
         if u_in is None:
             u_in, pinfo = self.planner.plan(w.t, state, obs_now, self.goal)
@@ -243,25 +233,8 @@ class Episode:
             u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
         u_safe, finfo = self.cbf.filter(state, obs_now, u_in)
         w.command(u_safe)
-        if pinfo.planned:
-            self._planner_ms.append(pinfo.planner_ms)
-        self._cbf_ms.append(finfo.solve_ms)
-        e_step = cbf_energy(u_safe, u_in, p.R_u_diag)
-        self._e_cbf += e_step
-        self._active += bool(finfo.active)
-        self._infeasible += bool(finfo.infeasible)
-        self._faults += finfo.fallback == PERCEPTION_FAULT
-        if finfo.infeasible:
-            self._e_cbf_inf += e_step
-        self._margins_exec.append(finfo.margins)
-        if pinfo.margins_img is not None:
-            self._margins_img.append(pinfo.margins_img)
-        self._n_ctrl += 1
-        if not self._modes or self._modes[-1][1] != pinfo.mode:
-            self._modes.append((round(w.t, 3), pinfo.mode))
         ts = w.true_state()
-        self._live.add(w.t, state, u_safe, self.goal, (ts.px, ts.py))
-        self._is_stopped = bool(np.hypot(ts.vx, ts.vy) < p.v_freeze_mps)   # until the next control tick
+        self.metrics.control_step(w.t, state, ts, self.goal, u_in, u_safe, pinfo, finfo)
         rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
                          bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D), pinfo.path, self._scan)
         for observer in self.observers:
@@ -280,35 +253,22 @@ class Episode:
             w.step(nb)
             self._k += nb
             nxt -= nb
-            if self._is_stopped:
-                self._stopped += nb * w.dt
-            self._min_clear = min(self._min_clear,
-                                  self.truth.clearance(w.pose(), self.walkers.positions(), self._min_clear))
+            self.metrics.physics(nb, w.dt, self.truth.clearance(w.pose(), self.walkers.positions(),
+                                                                self.metrics.min_clearance_m))
             self._collision = self.truth.in_contact(w.data)
         if self._collision:
             self.done = True
 
     def result(self) -> EpisodeResult:
         """The episode's metrics so far (final once ``done``)."""
-        w, p = self.world, self.params
+        w = self.world
         ts = w.true_state()
-        n = max(self._n_ctrl, 1)
-        m_img = margin_stats(np.concatenate(self._margins_img)) if self._margins_img else (None, None)
-        m_exec = margin_stats(np.concatenate(self._margins_exec)) if self._margins_exec else (None, None)
         return EpisodeResult(
             scenario=self.scenario.name, method=self.method or EXTERNAL, seed=self.seed, success=self._success,
             collision=self._collision, timeout=self.done and not (self._success or self._collision),
-            time_s=round(w.t, 4), min_clearance_m=float(self._min_clear), e_cbf=self._e_cbf,
-            cbf_active_ratio=self._active / n, qp_infeasible_ratio=self._infeasible / n,
-            planner_p95_ms=_p95(self._planner_ms), cbf_p95_ms=_p95(self._cbf_ms),
-            perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
-            final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
-            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
-            perception_faults=self._faults, missed_scans=self._missed_scans, mode_history=list(self._modes), perception=self.perception_mode,
-            warnings=w.warnings(),
-            **self._live.metrics(self._modes, w.t),
-            e_cbf_infeasible=self._e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
-            m_exec_p90_m=m_exec[1])
+            time_s=round(w.t, 4), final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
+            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0,
+            perception=self.perception_mode, warnings=w.warnings(), **self.metrics.results(w.t))
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
@@ -316,10 +276,6 @@ class Episode:
         while not self.done:
             self.act()
         return self.result()
-
-
-def _p95(xs) -> float:
-    return float(np.percentile(xs, 95)) if len(xs) else 0.0
 
 
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)
