@@ -18,18 +18,17 @@ from typing import Callable
 
 import numpy as np
 
-from .control.cbf import PERCEPTION_FAULT, CbfFilter
+from .control.cbf import CbfFilter
 from .control.methods import make_planner
-from .control.liveness import LivenessRecorder
-from .control.metrics import cbf_energy, margin_stats
+from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
-from .control.prediction import q_sigma_for
+from .control.prediction import age_obstacles
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
 from .scenario import Scenario
 from .sim.lidar import LidarConfig
-from .sim.pedestrians import Pedestrians, SocialForceParams
+from .sim.pedestrians import SocialForceParams, WorldPedestrians
 from .sim.truth import GroundTruth
 from .sim.world import SimWorld
 from .types import Obstacles, RobotState
@@ -136,18 +135,10 @@ class Episode:
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
         self.truth = GroundTruth(self.world.model, self.world.scene)
-        peds = scenario.pedestrians
-        self.peds = Pedestrians([p.waypoints for p in peds], [p.speed_mps for p in peds],
-                                [p.start_time_s for p in peds], [p.radius_m for p in peds],
-                                [p.loop for p in peds], [p.reactive for p in peds],
-                                params=pedestrian_params, robot_radius=params.uncertainty.r_robot_m,
-                                stops=[p.stop for p in peds], turns=[p.turn for p in peds], seed=self.seed)
-        m = self.world.model
-        import mujoco
-        self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")] for p in peds]
-        self._ped_t, self._ped_next = 0.0, 0.0
-        self._move_pedestrians(self.world)
-        self.world.add_pre_step(self._move_pedestrians)
+        # the pedestrians walk in the world (their social-force model and mocap bodies: sim/pedestrians.py)
+        self.walkers = WorldPedestrians(self.world, scenario.pedestrians, pedestrian_params,
+                                        robot_radius=params.uncertainty.r_robot_m, seed=self.seed)
+        self.peds = self.walkers.pedestrians
         # method None: no planner, every act() gets its u_in from outside (EXTERNAL)
         self.planner = None if method is None else make_planner(method, params, method_params)
         if self.planner is not None:
@@ -157,28 +148,10 @@ class Episode:
         self.goal = scenario.goal
         self.observers: list[Callable[[StepRecord], None]] = []
 
-    #: the social-force model runs at 50 Hz (its relaxation time is 0.5 s); between its updates the mocap bodies
-    #: move on at the pedestrians' velocities, so their motion in the physics stays smooth
-    PEDESTRIAN_PERIOD_S = 0.02
-
-    def _move_pedestrians(self, world: SimWorld) -> None:
-        """Before each physics block: the social-force step when due, and the mocap bodies moved to where the
-        pedestrians are now (extrapolated at their velocities between social-force steps)."""
-        if not self._mocap:
-            return
-        t = world.t
-        if t >= self._ped_next - 1e-9:
-            self.peds.step(t, self.PEDESTRIAN_PERIOD_S, robot_xy=tuple(world.data.qpos[0:2]))
-            self._ped_t, self._ped_next = t, t + self.PEDESTRIAN_PERIOD_S
-        world.data.mocap_pos[self._mocap, :2] = self.peds.p + (t - self._ped_t) * self.peds.v
-
-    def _ped_positions(self) -> np.ndarray:
-        return self.world.data.mocap_pos[self._mocap, :2] if self._mocap else np.zeros((0, 2))
-
     def _estimate(self, scan, odom: RobotState) -> Obstacles:
         if self.perception_mode == "truth":
             ts = self.world.true_state()
-            return self.truth.obstacles((ts.px, ts.py), self._ped_positions(), self.peds.v)
+            return self.truth.obstacles((ts.px, ts.py), self.walkers.positions(), self.walkers.velocities)
         return self.perception.update(scan, (odom.px, odom.py, odom.theta))
 
     # --- the loop, one control period at a time ------------------------------------------------------------
@@ -199,16 +172,7 @@ class Episode:
         self._sps = int(round(1.0 / w.lidar.config.rate_hz / w.dt))           # physics steps per scan
         self._limit = int(round(self.time_limit_s / w.dt))
         self._k = 0
-        self._e_cbf, self._active, self._infeasible, self._n_ctrl, self._stopped = 0.0, 0, 0, 0, 0.0
-        self._e_cbf_inf = 0.0
-        self._faults, self._is_stopped = 0, False
-        self._missed_scans = 0
-        self._margins_img: list[np.ndarray] = []
-        self._margins_exec: list[np.ndarray] = []
-        self._planner_ms, self._cbf_ms, self._percep_ms = [], [], []
-        self._modes: list[tuple[float, str]] = []
-        self._live = LivenessRecorder(self.params.T_C_s)
-        self._min_clear = np.inf
+        self.metrics = EpisodeMetrics.for_params(self.params)     # every metric of the episode goes through it
         self._collision = self._success = False
         self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
         self.state: RobotState | None = None       # the stack's state at the pending control tick
@@ -231,10 +195,10 @@ class Episode:
                     self._scan = scan
                     t0 = time.perf_counter()
                     self._obstacles = self._estimate(scan, w.odom())
-                    self._percep_ms.append(1e3 * (time.perf_counter() - t0))
+                    self.metrics.scan(1e3 * (time.perf_counter() - t0))
                     self._scan_t = w.t
                 else:
-                    self._missed_scans += 1
+                    self.metrics.scan(None)
             if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
                 if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= self.params.eps_g_m:
@@ -250,28 +214,18 @@ class Episode:
         return self._scan
 
     def obstacles_now(self) -> Obstacles:
-        """The estimates at the pending control tick, advanced to now with their velocity (Eq. (2),
-        ``eq:obs_prop``). They are up to one scan period old; when scans went missing (a LiDAR fault), older: then
-        the age beyond one scan period also grows their covariance as the prediction does, Sigma + q_Sigma,i (age -
-        T_scan) I (Eq. (3), ``eq:cov_prop``; q_Sigma,i of ``prediction.q_sigma_for``). Within one scan period the
-        covariance is the perception's (the sensor's normal rate). docs/fidelity.md: "Missing scans"."""
-        obstacles, age = self._obstacles, self.world.t - self._scan_t
-        if age <= 0 or len(obstacles) == 0:
-            return obstacles
-        cov = obstacles.cov
-        stale = age - 1.0 / self.world.lidar.config.rate_hz
-        if stale > 1e-9:
-            q = q_sigma_for(obstacles, self.params.uncertainty)
-            cov = cov + (stale * q)[:, None, None] * np.eye(2)[None, :, :]
-        return Obstacles(obstacles.p + age * obstacles.v, obstacles.v, cov, obstacles.r, obstacles.static,
-                         obstacles.ids)
+        """The estimates at the pending control tick, aged to now (``prediction.age_obstacles``: moved with their
+        velocity, Eq. (2) ``eq:obs_prop``; when scans went missing, the covariance grown beyond one scan period,
+        Eq. (3) ``eq:cov_prop``)."""
+        return age_obstacles(self._obstacles, self.world.t - self._scan_t, 1.0 / self.world.lidar.config.rate_hz,
+                             self.params.uncertainty)
 
     def act(self, u_in=None) -> StepRecord | None:
         """One control period at the pending control tick: the planner's u_in (or the given one), the common CBF
         filter, the command; then physics up to the next control tick. Returns what the step did."""
         if self.done:
             raise RuntimeError("the episode is over")
-        p, w, state = self.params, self.world, self.state
+        w, state = self.world, self.state
         obs_now = self.obstacles_now()
         if u_in is None:
             u_in, pinfo = self.planner.plan(w.t, state, obs_now, self.goal)
@@ -279,25 +233,8 @@ class Episode:
             u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
         u_safe, finfo = self.cbf.filter(state, obs_now, u_in)
         w.command(u_safe)
-        if pinfo.planned:
-            self._planner_ms.append(pinfo.planner_ms)
-        self._cbf_ms.append(finfo.solve_ms)
-        e_step = cbf_energy(u_safe, u_in, p.R_u_diag)
-        self._e_cbf += e_step
-        self._active += bool(finfo.active)
-        self._infeasible += bool(finfo.infeasible)
-        self._faults += finfo.fallback == PERCEPTION_FAULT
-        if finfo.infeasible:
-            self._e_cbf_inf += e_step
-        self._margins_exec.append(finfo.margins)
-        if pinfo.margins_img is not None:
-            self._margins_img.append(pinfo.margins_img)
-        self._n_ctrl += 1
-        if not self._modes or self._modes[-1][1] != pinfo.mode:
-            self._modes.append((round(w.t, 3), pinfo.mode))
         ts = w.true_state()
-        self._live.add(w.t, state, u_safe, self.goal, (ts.px, ts.py))
-        self._is_stopped = bool(np.hypot(ts.vx, ts.vy) < p.v_freeze_mps)   # until the next control tick
+        self.metrics.control_step(w.t, state, ts, self.goal, u_in, u_safe, pinfo, finfo)
         rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
                          bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D), pinfo.path, self._scan)
         for observer in self.observers:
@@ -316,35 +253,22 @@ class Episode:
             w.step(nb)
             self._k += nb
             nxt -= nb
-            if self._is_stopped:
-                self._stopped += nb * w.dt
-            self._min_clear = min(self._min_clear,
-                                  self.truth.clearance(w.pose(), self._ped_positions(), self._min_clear))
+            self.metrics.physics(nb, w.dt, self.truth.clearance(w.pose(), self.walkers.positions(),
+                                                                self.metrics.min_clearance_m))
             self._collision = self.truth.in_contact(w.data)
         if self._collision:
             self.done = True
 
     def result(self) -> EpisodeResult:
         """The episode's metrics so far (final once ``done``)."""
-        w, p = self.world, self.params
+        w = self.world
         ts = w.true_state()
-        n = max(self._n_ctrl, 1)
-        m_img = margin_stats(np.concatenate(self._margins_img)) if self._margins_img else (None, None)
-        m_exec = margin_stats(np.concatenate(self._margins_exec)) if self._margins_exec else (None, None)
         return EpisodeResult(
             scenario=self.scenario.name, method=self.method or EXTERNAL, seed=self.seed, success=self._success,
             collision=self._collision, timeout=self.done and not (self._success or self._collision),
-            time_s=round(w.t, 4), min_clearance_m=float(self._min_clear), e_cbf=self._e_cbf,
-            cbf_active_ratio=self._active / n, qp_infeasible_ratio=self._infeasible / n,
-            planner_p95_ms=_p95(self._planner_ms), cbf_p95_ms=_p95(self._cbf_ms),
-            perception_p95_ms=_p95(self._percep_ms), stopped_time_s=round(self._stopped, 4),
-            final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
-            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0, control_steps=self._n_ctrl,
-            perception_faults=self._faults, missed_scans=self._missed_scans, mode_history=list(self._modes), perception=self.perception_mode,
-            warnings=w.warnings(),
-            **self._live.metrics(self._modes, w.t),
-            e_cbf_infeasible=self._e_cbf_inf, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0],
-            m_exec_p90_m=m_exec[1])
+            time_s=round(w.t, 4), final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
+            sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0,
+            perception=self.perception_mode, warnings=w.warnings(), **self.metrics.results(w.t))
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
@@ -352,10 +276,6 @@ class Episode:
         while not self.done:
             self.act()
         return self.result()
-
-
-def _p95(xs) -> float:
-    return float(np.percentile(xs, 95)) if len(xs) else 0.0
 
 
 #: metrics that must be identical between two runs of the same episode (everything but wall-clock timings)

@@ -8,6 +8,7 @@ import pytest
 
 from bigcbf.errors import UserError
 from bigcbf.params import RobotProfile, load
+from bigcbf.params.perception import X3_LASER_MOUNT
 from bigcbf.params.robot import ImuModel, LidarModel, OdometryModel
 from bigcbf.scenario import (DEFAULT_ROBOT_PROFILE, load_robot_profile, load_scenario, profile_files,
                              scenario_files)
@@ -98,7 +99,7 @@ def test_lidar_range_noise_grows_with_range():
     assert m.range_sigma(0.0) == 0.005 and m.range_sigma(2.0) == pytest.approx(0.015)
     world = SimWorld(SceneSpec(walls=(Wall(1, -3, 1, 3), Wall(-4.0, -3, -4.0, 3))),
                      profile=RobotProfile(lidar=m), seed=2)
-    laser_x = 0.0435
+    laser_x = X3_LASER_MOUNT[0]
     errs_near, errs_far = [], []
     for _ in range(20):
         s = world.scan()

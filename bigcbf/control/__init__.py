@@ -20,14 +20,14 @@ from .big_cbf import BigCbfPlanner
 from .cbf import CbfFilter, CbfRows, FilterInfo, cbf_rows, select_constraints
 from .imagination import Imagination, imagine
 from .methods import METHODS, CbfOnlyPlanner
-from .metrics import EpisodeSummary, StepMetrics, cbf_energy, step_metrics, summarize
+from .metrics import EpisodeMetrics, cbf_energy, p95, percentile
 from .planner import PlanInfo, Planner
-from .prediction import predict_obstacles, q_sigma_for
+from .prediction import age_obstacles, predict_obstacles, q_sigma_for
 from .selection import BehaviorSelector, Selection
 from .uncertainty import barrier, e_exec, inflated_radius, nominal_velocity, uncertainty_radius
 
 __all__ = ["BEHAVIORS", "MODES", "REVERSE", "behavior_command", "BigCbfPlanner", "CbfFilter", "CbfRows",
            "FilterInfo", "cbf_rows", "select_constraints", "Imagination", "imagine", "METHODS", "CbfOnlyPlanner",
-           "EpisodeSummary", "StepMetrics", "cbf_energy", "step_metrics", "summarize", "PlanInfo", "Planner",
-           "predict_obstacles", "q_sigma_for", "BehaviorSelector", "Selection", "barrier", "e_exec",
+           "EpisodeMetrics", "cbf_energy", "p95", "percentile", "PlanInfo", "Planner",
+           "age_obstacles", "predict_obstacles", "q_sigma_for", "BehaviorSelector", "Selection", "barrier", "e_exec",
            "inflated_radius", "nominal_velocity", "uncertainty_radius"]

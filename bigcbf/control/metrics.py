@@ -1,19 +1,47 @@
-"""The per-step metrics of Sec. IV: E_CBF (Eq. 20), CBF activity, QP infeasibility, timings; and the diagnostics of
-the shared-uncertainty ablation: the margins kappa_l m_i each layer used (Eqs. 14-15) and the part of E_CBF spent on
-steps whose QP was infeasible."""
+"""The metrics of an episode, all accumulated in one place (:class:`EpisodeMetrics`): the per-step metrics of
+Sec. IV (E_CBF ``eq:sim_cbf_energy``, CBF activity, QP infeasibility, timings), the robot's stopped time and true
+clearance, the scans that never arrived and the steps the filter braked on implausible estimates, the chatter and
+stall metrics of ``control/liveness.py``, and the diagnostics of the shared-uncertainty ablation: the margins
+kappa_l m_i each layer used (``eq:shared_barrier``, ``eq:uncertainty_margin``) and the part of E_CBF spent on steps
+whose QP was infeasible.
+
+One percentile rule for every P95 (and the margins' P90) of the project: :func:`percentile`.
+
+Robot-side code: the accumulator takes numbers, states and the planner's and filter's info records; the episode
+(bigcbf/episode.py) feeds it what the simulator measured (true speed and clearance). No MuJoCo here.
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
 import numpy as np
 
 from ..params.stack import StackParams
-from .cbf import FilterInfo
+from .cbf import PERCEPTION_FAULT, FilterInfo
+from .liveness import LivenessRecorder
 from .planner import PlanInfo
 
 
+def percentile(samples, q: float) -> float:
+    """The project's one percentile rule: the q-th percentile (0-100) of the pooled samples (any shape) by linear
+    interpolation between the order statistics (``numpy.percentile``'s default, Hyndman & Fan's type 7: with the
+    n samples sorted, x_(1) <= ... <= x_(n), the position h = (n - 1) q / 100, the result
+    x_(floor h + 1) + (h - floor h) (x_(floor h + 2) - x_(floor h + 1))). No samples: 0.0.
+
+    Every P95 (timings of episodes, of ``bigcbf perf``) and the margins' P90 use it. (The twin's calibrated bounds
+    are a different statistic on purpose: ``twin.signals.quantile_upper`` returns a sample, as a bound read off data
+    should be.)"""
+    x = np.asarray(samples, float).ravel()
+    return float(np.percentile(x, q)) if x.size else 0.0
+
+
+def p95(samples) -> float:
+    """The 95th percentile of the samples by :func:`percentile`'s rule (0.0 for none)."""
+    return percentile(samples, 95)
+
+
 def cbf_energy(u_safe, u_in, R_u) -> float:
-    """Eq. (20): E_CBF = sum_k (u_safe,k - u_in,k)^T R_u (u_safe,k - u_in,k).
+    """Eq. (20), ``eq:sim_cbf_energy``: E_CBF = sum_k (u_safe,k - u_in,k)^T R_u (u_safe,k - u_in,k).
 
     ``u_safe``, ``u_in``: (3,) for one step or (K, 3) for a sequence; ``R_u``: (3,) diagonal or (3, 3).
     """
@@ -24,72 +52,110 @@ def cbf_energy(u_safe, u_in, R_u) -> float:
 
 
 def margin_stats(samples) -> tuple[float | None, float | None]:
-    """(mean, 90th percentile) [m] of margin samples kappa_l m_i (any shape; pooled); (None, None) when empty."""
+    """(mean, 90th percentile by :func:`percentile`) [m] of margin samples kappa_l m_i (any shape; pooled);
+    (None, None) when empty."""
     x = np.asarray(samples, float).ravel()
     if x.size == 0:
         return None, None
-    return float(x.mean()), float(np.percentile(x, 90))
+    return float(x.mean()), percentile(x, 90)
 
 
-@dataclass
-class StepMetrics:
-    """One control step's contribution to the Sec. IV metrics."""
+class EpisodeMetrics:
+    """Every metric of one episode, accumulated as it runs; :meth:`results` gives them under EpisodeResult's names.
 
-    e_cbf: float          # the Eq. (20) term of this step
-    active: bool          # at least one CBF constraint was active (the filter changed the command)
-    infeasible: bool      # the hard QP was infeasible
-    fallback: str | None  # the filter's fallback, if any
-    mode: str             # the planner's mode
-    planned: bool         # a planning cycle ran
-    planner_ms: float
-    filter_ms: float
-    margins_exec: np.ndarray | None = None   # kappa_exec m_i of the CBF rows (FilterInfo.margins) [m]
-    margins_img: np.ndarray | None = None    # kappa_img m_i of the selected rollout (PlanInfo.margins_img) [m]
+    The episode calls :meth:`scan` for every scan that was due (its perception time, or None when it never
+    arrived), :meth:`control_step` at every control step (after the command left), and :meth:`physics` after every
+    block of physics steps (the true clearance measured then). Definitions:
 
+    - ``e_cbf``: Eq. (20) (``eq:sim_cbf_energy``) summed over the control steps with the fixed R_u;
+      ``e_cbf_infeasible``: its part from steps whose hard QP was infeasible.
+    - ``cbf_active_ratio``, ``qp_infeasible_ratio``: fractions of the control steps whose filter had an active
+      constraint / an infeasible QP (0 with no step).
+    - ``planner_p95_ms`` over the calls that ran a planning cycle (``PlanInfo.planned``), ``cbf_p95_ms`` over every
+      filter call, ``perception_p95_ms`` over the scans processed: :func:`p95` (0 with no sample).
+    - ``stopped_time_s``: simulated time whose last control step saw a true planar speed below ``v_freeze_mps``.
+    - ``min_clearance_m``: the smallest true clearance over the physics blocks (+inf with none).
+    - ``perception_faults``: control steps whose filter braked on implausible estimates (``PERCEPTION_FAULT``);
+      ``missed_scans``: scans that never arrived.
+    - ``mode_history``: [(t rounded to 1 ms, mode)] at each change of the planner's mode.
+    - the margins' (mean, P90) of each layer by :func:`margin_stats`, pooled over the episode (None: no sample).
+    - the chatter and stall metrics of :class:`~bigcbf.control.liveness.LivenessRecorder`.
+    """
 
-def step_metrics(u_in, u_safe, plan: PlanInfo, filt: FilterInfo, params: StackParams) -> StepMetrics:
-    """The metrics of one control step (E_CBF with the fixed R_u of ``params``)."""
-    return StepMetrics(e_cbf=cbf_energy(u_safe, u_in, params.R_u_diag), active=bool(filt.active),
-                       infeasible=bool(filt.infeasible), fallback=filt.fallback, mode=plan.mode,
-                       planned=bool(plan.planned), planner_ms=float(plan.planner_ms), filter_ms=float(filt.solve_ms),
-                       margins_exec=filt.margins, margins_img=plan.margins_img)
+    def __init__(self, R_u_diag, v_freeze_mps: float, T_C_s: float):
+        self.R_u = R_u_diag
+        self.v_freeze_mps = float(v_freeze_mps)
+        self.steps = 0
+        self.e_cbf = 0.0
+        self.e_cbf_infeasible = 0.0
+        self.active = 0
+        self.infeasible = 0
+        self.perception_faults = 0
+        self.missed_scans = 0
+        self.stopped_s = 0.0
+        self.min_clearance_m = math.inf
+        self.planner_ms: list[float] = []
+        self.filter_ms: list[float] = []
+        self.perception_ms: list[float] = []
+        self.margins_img: list[np.ndarray] = []
+        self.margins_exec: list[np.ndarray] = []
+        self.mode_history: list[tuple[float, str]] = []
+        self.liveness = LivenessRecorder(T_C_s)
+        self._stopped_now = False        # the last control step saw the robot below v_freeze
 
+    @classmethod
+    def for_params(cls, params: StackParams) -> "EpisodeMetrics":
+        """An accumulator with the stack's R_u, v_freeze and control period T_C."""
+        return cls(params.R_u_diag, params.v_freeze_mps, params.T_C_s)
 
-@dataclass
-class EpisodeSummary:
-    """Sec. IV aggregates over an episode's control steps."""
+    def scan(self, perception_ms: float | None) -> None:
+        """A scan was due: its perception time [ms], or None when it never arrived (a fault)."""
+        if perception_ms is None:
+            self.missed_scans += 1
+        else:
+            self.perception_ms.append(perception_ms)
 
-    steps: int
-    e_cbf: float                 # Eq. (20) summed over the steps
-    active_ratio: float          # fraction of steps with an active CBF constraint
-    infeasible_ratio: float      # fraction of steps with an infeasible QP
-    planner_p95_ms: float        # P95 over planning cycles (steps with planned=True; all steps if none)
-    filter_p95_ms: float         # P95 of the filter time over all steps
-    mode_counts: dict[str, int]  # steps per mode
-    e_cbf_infeasible: float = 0.0            # the part of e_cbf from steps with an infeasible QP
-    m_img_mean_m: float | None = None        # margin_stats of the imagination layer's margins (None: no imagination)
-    m_img_p90_m: float | None = None
-    m_exec_mean_m: float | None = None       # margin_stats of the CBF rows' margins (None: no row at all)
-    m_exec_p90_m: float | None = None
+    def control_step(self, t: float, state, true_state, goal, u_in, u_safe, plan: PlanInfo,
+                     filt: FilterInfo) -> None:
+        """One control step at time ``t`` [s]: the controller's state (odometry), the true state, the goal, the
+        planner's u_in and the filtered u_safe with their info records."""
+        if plan.planned:
+            self.planner_ms.append(plan.planner_ms)
+        self.filter_ms.append(filt.solve_ms)
+        e_step = cbf_energy(u_safe, u_in, self.R_u)
+        self.e_cbf += e_step
+        self.active += bool(filt.active)
+        self.infeasible += bool(filt.infeasible)
+        self.perception_faults += filt.fallback == PERCEPTION_FAULT
+        if filt.infeasible:
+            self.e_cbf_infeasible += e_step
+        self.margins_exec.append(filt.margins)
+        if plan.margins_img is not None:
+            self.margins_img.append(plan.margins_img)
+        self.steps += 1
+        if not self.mode_history or self.mode_history[-1][1] != plan.mode:
+            self.mode_history.append((round(t, 3), plan.mode))
+        self.liveness.add(t, state, u_safe, goal, (true_state.px, true_state.py))
+        self._stopped_now = bool(np.hypot(true_state.vx, true_state.vy) < self.v_freeze_mps)   # until the next step
 
+    def physics(self, n_steps: int, dt: float, clearance_m: float) -> None:
+        """A block of ``n_steps`` physics steps of ``dt`` [s] ran; the true clearance after it [m]."""
+        if self._stopped_now:
+            self.stopped_s += n_steps * dt
+        self.min_clearance_m = min(self.min_clearance_m, clearance_m)
 
-def summarize(steps: list[StepMetrics]) -> EpisodeSummary:
-    """Aggregate per-step metrics (an empty list gives zeros)."""
-    n = len(steps)
-    if n == 0:
-        return EpisodeSummary(0, 0.0, 0.0, 0.0, 0.0, 0.0, {})
-    planned = [s.planner_ms for s in steps if s.planned] or [s.planner_ms for s in steps]
-    counts: dict[str, int] = {}
-    for s in steps:
-        counts[s.mode] = counts.get(s.mode, 0) + 1
-    img = [s.margins_img for s in steps if s.margins_img is not None]
-    exe = [s.margins_exec for s in steps if s.margins_exec is not None]
-    m_img = margin_stats(np.concatenate(img)) if img else (None, None)
-    m_exec = margin_stats(np.concatenate(exe)) if exe else (None, None)
-    return EpisodeSummary(
-        steps=n, e_cbf=float(sum(s.e_cbf for s in steps)),
-        active_ratio=sum(s.active for s in steps) / n, infeasible_ratio=sum(s.infeasible for s in steps) / n,
-        planner_p95_ms=float(np.percentile(planned, 95)),
-        filter_p95_ms=float(np.percentile([s.filter_ms for s in steps], 95)), mode_counts=counts,
-        e_cbf_infeasible=float(sum(s.e_cbf for s in steps if s.infeasible)),
-        m_img_mean_m=m_img[0], m_img_p90_m=m_img[1], m_exec_mean_m=m_exec[0], m_exec_p90_m=m_exec[1])
+    def results(self, duration_s: float) -> dict:
+        """The metrics so far under EpisodeResult's field names (``duration_s``: the episode's time so far)."""
+        n = max(self.steps, 1)
+        m_img = margin_stats(np.concatenate(self.margins_img)) if self.margins_img else (None, None)
+        m_exec = margin_stats(np.concatenate(self.margins_exec)) if self.margins_exec else (None, None)
+        return dict(
+            min_clearance_m=float(self.min_clearance_m), e_cbf=self.e_cbf,
+            cbf_active_ratio=self.active / n, qp_infeasible_ratio=self.infeasible / n,
+            planner_p95_ms=p95(self.planner_ms), cbf_p95_ms=p95(self.filter_ms),
+            perception_p95_ms=p95(self.perception_ms), stopped_time_s=round(self.stopped_s, 4),
+            control_steps=self.steps, perception_faults=self.perception_faults, missed_scans=self.missed_scans,
+            mode_history=list(self.mode_history),
+            **self.liveness.metrics(self.mode_history, duration_s),
+            e_cbf_infeasible=self.e_cbf_infeasible, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1],
+            m_exec_mean_m=m_exec[0], m_exec_p90_m=m_exec[1])

@@ -34,3 +34,22 @@ def predict_obstacles(obstacles: Obstacles, N: int, dt: float,
     growth = (k * dt)[:, None] * q[None, :]                       # (N+1, M)
     cov = obstacles.cov[None, :, :, :] + growth[:, :, None, None] * np.eye(2)[None, None, :, :]
     return p, cov
+
+
+def age_obstacles(obstacles: Obstacles, age_s: float, fresh_s: float, unc: UncertaintyParams) -> Obstacles:
+    """The estimates of a scan ``age_s`` seconds old, brought to now: the center moved with its velocity over the
+    whole age (Eq. (2), ``eq:obs_prop``, one step of dt = age), and, when the age exceeds ``fresh_s`` (one period of
+    the sensor: scans went missing), the covariance grown by Eq. (3) (``eq:cov_prop``) over the excess,
+    Sigma + q_Sigma,i (age - fresh) I_2 with q_Sigma,i of :func:`q_sigma_for`. Within one sensor period the
+    covariance is the perception's own (its model covers the sensor's normal rate). docs/fidelity.md: "Missing
+    scans". Returns ``obstacles`` itself when the age is not positive or there is none.
+    """
+    if age_s <= 0 or len(obstacles) == 0:
+        return obstacles
+    cov = obstacles.cov
+    stale = age_s - fresh_s
+    if stale > 1e-9:
+        q = q_sigma_for(obstacles, unc)
+        cov = cov + (stale * q)[:, None, None] * np.eye(2)[None, :, :]
+    return Obstacles(obstacles.p + age_s * obstacles.v, obstacles.v, cov, obstacles.r, obstacles.static,
+                     obstacles.ids)

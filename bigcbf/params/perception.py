@@ -10,15 +10,21 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+#: The laser frame's pose in base_link on the Rosmaster X3 model: x [m], y [m], yaw [rad] (URDF ``laser_joint``;
+#: bigcbf/assets/rosmaster_x3/README.md). The one definition: the MJCF's ``lidar`` site is generated from it
+#: (assets/rosmaster_x3/generate.py, which adds the height), the perception's default mounting below and the
+#: synthetic scans (perception/synthetic.py) use it.
+X3_LASER_MOUNT = (0.0435, 0.0, 0.0)
+
 
 @dataclass(frozen=True)
 class PerceptionParams:
     """Parameters of :class:`bigcbf.perception.Perception` (see the module docstring for the file format)."""
 
     # --- laser mounting: pose of the laser frame in base_link -------------------------------------------------
-    laser_x_m: float = 0.0435
-    laser_y_m: float = 0.0
-    laser_yaw_rad: float = 0.0
+    laser_x_m: float = X3_LASER_MOUNT[0]
+    laser_y_m: float = X3_LASER_MOUNT[1]
+    laser_yaw_rad: float = X3_LASER_MOUNT[2]
 
     # --- clustering (scan-order segmentation) -------------------------------------------------------------------
     #: Consecutive valid beams belong to one cluster when their points are closer than

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..params.perception import X3_LASER_MOUNT
 from ..types import LaserScan
 
 N_BEAMS = 360
 ANGLE_MIN = -np.pi
 ANGLE_INC = 2 * np.pi / N_BEAMS
 RANGE_MIN, RANGE_MAX = 0.12, 8.0
-LASER = (0.0435, 0.0, 0.0)          # laser pose in base_link: x [m], y [m], yaw [rad] (Rosmaster X3 model)
+LASER = X3_LASER_MOUNT              # laser pose in base_link: x [m], y [m], yaw [rad] (Rosmaster X3 model)
 
 
 def box_segments(cx: float, cy: float, hx: float, hy: float, yaw: float = 0.0) -> list[tuple[float, ...]]:

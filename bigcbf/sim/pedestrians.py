@@ -9,7 +9,8 @@ with e_i the unit vector to the next waypoint, n_ij the unit vector from j to i,
 w(phi) = lambda + (1 - lambda) (1 + cos phi) / 2 the anisotropy that lets people react mostly to what is ahead of
 them. "Reactive" pedestrians also treat the robot (radius r_R, true position) as such a neighbour, with its own
 strength A_robot; non-reactive ones ignore it (they model people who do not see the robot). Speeds are capped at
-1.3 v0. Integrated by semi-implicit Euler (the episode steps it at 50 Hz); positions drive MuJoCo mocap bodies.
+1.3 v0. Integrated by semi-implicit Euler (stepped at 50 Hz); positions drive MuJoCo mocap bodies
+(:class:`WorldPedestrians` wires them into a SimWorld).
 
 Faults (the scenario's ``stop`` and ``turn`` keys of a pedestrian, ``bigcbf/params/faults.py``): during a stop event
 a walking pedestrian's preferred velocity is zero (it comes to a halt within about tau, as a person does, and the
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from ..params.checks import check_ranges
@@ -171,3 +173,54 @@ class Pedestrians:
         v[~active & ~self.done] = 0.0
         self.v = v
         self.p = self.p + dt * v
+
+
+class WorldPedestrians:
+    """A scenario's pedestrians walking in a SimWorld: the social-force model (:class:`Pedestrians`) stepped every
+    ``PERIOD_S`` before the physics blocks (reactive pedestrians see the robot's true position), and each
+    pedestrian's mocap body ``ped_<name>`` (sim/scene.py) moved to where the pedestrian is now, extrapolated at its
+    velocity between social-force steps so its motion in the physics stays smooth.
+
+    ``specs``: the scenario's pedestrian entries (``name``, ``waypoints``, ``speed_mps``, ``start_time_s``,
+    ``radius_m``, ``loop``, ``reactive``, ``stop``, ``turn``); ``seed``: the episode's, for the fault streams.
+    Registers itself as the world's pre-step hook and places the bodies at once.
+    """
+
+    #: the social-force model runs at 50 Hz (its relaxation time is 0.5 s)
+    PERIOD_S = 0.02
+
+    def __init__(self, world, specs, params: SocialForceParams = SocialForceParams(), robot_radius: float = 0.15,
+                 seed: int = 0):
+        specs = list(specs)
+        self.pedestrians = Pedestrians([p.waypoints for p in specs], [p.speed_mps for p in specs],
+                                 [p.start_time_s for p in specs], [p.radius_m for p in specs],
+                                 [p.loop for p in specs], [p.reactive for p in specs],
+                                 params=params, robot_radius=robot_radius,
+                                 stops=[p.stop for p in specs], turns=[p.turn for p in specs], seed=seed)
+        m = world.model
+        self._world = world
+        self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")]
+                       for p in specs]
+        self._t, self._next = 0.0, 0.0
+        self.move(world)
+        world.add_pre_step(self.move)
+
+    def move(self, world) -> None:
+        """Before each physics block: the social-force step when due, and the mocap bodies moved to where the
+        pedestrians are now."""
+        if not self._mocap:
+            return
+        t = world.t
+        if t >= self._next - 1e-9:
+            self.pedestrians.step(t, self.PERIOD_S, robot_xy=tuple(world.data.qpos[0:2]))
+            self._t, self._next = t, t + self.PERIOD_S
+        world.data.mocap_pos[self._mocap, :2] = self.pedestrians.p + (t - self._t) * self.pedestrians.v
+
+    def positions(self) -> np.ndarray:
+        """(K, 2) the pedestrians' centres in the physics now (their mocap bodies) [m]."""
+        return self._world.data.mocap_pos[self._mocap, :2] if self._mocap else np.zeros((0, 2))
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(K, 2) the pedestrians' velocities [m/s]."""
+        return self.pedestrians.v

@@ -8,7 +8,7 @@ import pytest
 from bigcbf.cli.perf import BENCHES
 from bigcbf.control import METHODS, CbfFilter, PlanInfo, Planner, behavior_command
 from bigcbf.control.cbf import FilterInfo
-from bigcbf.control.metrics import cbf_energy, step_metrics, summarize
+from bigcbf.control.metrics import cbf_energy
 from bigcbf.params import SIMULATION
 from bigcbf.types import Obstacles, RobotState
 
@@ -20,22 +20,6 @@ def test_cbf_energy_eq_20_by_hand():
     assert cbf_energy([[0.5, 0.1, 0.0], [1.0, 1.0, 0.0]], [[0.8, 0.1, 0.2], [0.0, 0.0, 0.0]],
                       [1.0, 1.0, 0.1]) == pytest.approx(0.094 + 2.0)
     assert cbf_energy([1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [[2, 1, 0], [1, 2, 0], [0, 0, 1]]) == pytest.approx(6.0)
-
-
-def test_step_metrics_and_summary():
-    P = SIMULATION
-    finfo = lambda active, infeasible, ms: FilterInfo(active, infeasible, None, ms, 1, 0.1, np.zeros(1))
-    steps = [step_metrics([0.8, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", True, 2.0), finfo(True, False, 0.1), P),
-             step_metrics([0.5, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", False, 0.1), finfo(False, False, 0.05), P),
-             step_metrics([0.5, 0.2, 0], [0.0, 0, 0], PlanInfo("YIELD", False, 0.1), finfo(True, True, 0.2), P),
-             step_metrics([0.0, 0, 0], [0.0, 0, 0], PlanInfo("YIELD", True, 4.0), finfo(False, False, 0.05), P)]
-    assert steps[0].e_cbf == pytest.approx(0.09) and steps[2].e_cbf == pytest.approx(0.29)
-    s = summarize(steps)
-    assert s.steps == 4 and s.e_cbf == pytest.approx(0.38)
-    assert s.active_ratio == 0.5 and s.infeasible_ratio == 0.25
-    assert s.planner_p95_ms == pytest.approx(np.percentile([2.0, 4.0], 95))      # planning cycles only
-    assert s.mode_counts == {"GOAL": 2, "YIELD": 2}
-    assert summarize([]).steps == 0
 
 
 def test_registry_and_protocol():
@@ -77,21 +61,12 @@ def test_perf_provider():
     assert out["cbf_qp_rows_mean"] == 8.0          # the benchmark does solve QPs with 8 obstacle rows
 
 
-def test_margin_stats_and_infeasible_energy_by_hand():
+def test_margin_stats_by_hand():
     from bigcbf.control.metrics import margin_stats
     assert margin_stats([]) == (None, None)
     # 0.1 .. 1.0: mean 0.55, 90th percentile (linear interpolation) 0.1 + 0.9 * 0.9 = 0.91
     mean, p90 = margin_stats(np.arange(1, 11) / 10)
     assert mean == pytest.approx(0.55) and p90 == pytest.approx(0.91)
-    P = SIMULATION
-    f = lambda infeasible, m: FilterInfo(True, infeasible, None, 0.1, 1, 0.1, np.zeros(1), margins=np.array(m))
-    steps = [step_metrics([0.8, 0, 0], [0.5, 0, 0], PlanInfo("GOAL", True, 1.0, margins_img=np.array([0.3, 0.5])),
-                          f(False, [0.2]), P),
-             step_metrics([0.5, 0.2, 0], [0.0, 0, 0], PlanInfo("GOAL", False, 0.1), f(True, [0.4, 0.6]), P)]
-    s = summarize(steps)
-    assert s.e_cbf_infeasible == pytest.approx(0.29) and s.e_cbf == pytest.approx(0.38)
-    assert s.m_img_mean_m == pytest.approx(0.4) and s.m_exec_mean_m == pytest.approx(0.4)
-    assert s.m_exec_p90_m == pytest.approx(np.percentile([0.2, 0.4, 0.6], 90))
 
 
 def test_filter_reports_kappa_exec_m_i_of_its_rows():

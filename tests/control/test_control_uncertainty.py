@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bigcbf.control.prediction import predict_obstacles, q_sigma_for
+from bigcbf.control.prediction import age_obstacles, predict_obstacles, q_sigma_for
 from bigcbf.control.uncertainty import (barrier, e_exec, inflated_radius, kappa_img, lambda_max_2x2,
                                         nominal_velocity, uncertainty_radius)
 from bigcbf.params import PHYSICAL, SIMULATION, ExecutionModel, UncertaintyParams
@@ -37,6 +37,29 @@ def test_prediction_per_obstacle_growth_and_empty():
     assert p.shape == (16, 0, 2) and cov.shape == (16, 0, 2, 2)
     with pytest.raises(ValueError):
         predict_obstacles(obs, 3, 0.1, -1.0)
+
+
+def test_ageing_estimates_eqs_2_3_by_hand():
+    """A scan 0.35 s old at 10 Hz (0.25 s beyond one sensor period): centres moved over the whole age (eq:obs_prop),
+    covariances grown over the excess only (eq:cov_prop), q_Sigma of the dynamic / static obstacle."""
+    unc = dataclasses.replace(SIMULATION.uncertainty, q_sigma_m2_per_s=0.2, q_sigma_static_m2_per_s=0.04)
+    obs = Obstacles.from_lists([[1.0, 2.0], [3.0, 0.0]], v=[[0.5, -1.0], [0.0, 0.0]], r=[0.3, 0.2],
+                               cov=[np.diag([0.01, 0.04]), np.diag([0.02, 0.02])], static=[False, True])
+    aged = age_obstacles(obs, 0.35, 0.1, unc)
+    np.testing.assert_allclose(aged.p, [[1.175, 1.65], [3.0, 0.0]])               # (1, 2) + 0.35 (0.5, -1)
+    # diag(0.01, 0.04) + 0.2 * 0.25 I = diag(0.06, 0.09); diag(0.02, 0.02) + 0.04 * 0.25 I = diag(0.03, 0.03)
+    np.testing.assert_allclose(aged.cov, [np.diag([0.06, 0.09]), np.diag([0.03, 0.03])])
+    assert np.array_equal(aged.v, obs.v) and np.array_equal(aged.r, obs.r) and np.array_equal(aged.ids, obs.ids)
+    # the same as the prediction's recursion: one step of dt = age for the centre, of dt = age - period for Sigma
+    p1, _ = predict_obstacles(obs, 1, 0.35, q_sigma_for(obs, unc))
+    _, c1 = predict_obstacles(obs, 1, 0.25, q_sigma_for(obs, unc))
+    np.testing.assert_allclose(aged.p, p1[1]) and np.testing.assert_allclose(aged.cov, c1[1])
+    # within one sensor period: moved, the perception's covariance kept; no age or no obstacle: the same object
+    fresh = age_obstacles(obs, 0.08, 0.1, unc)
+    np.testing.assert_allclose(fresh.p, obs.p + 0.08 * obs.v) and np.testing.assert_array_equal(fresh.cov, obs.cov)
+    assert age_obstacles(obs, 0.0, 0.1, unc) is obs
+    empty = Obstacles.empty()
+    assert age_obstacles(empty, 1.0, 0.1, unc) is empty
 
 
 def test_execution_model_eq_1_by_hand():

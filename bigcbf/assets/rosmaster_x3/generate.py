@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from bigcbf.params.perception import X3_LASER_MOUNT
+
 # --- dimensions (m, kg); sources in README.md -------------------------------------------------------------------
 HALF_WHEELBASE = 0.080        # wheel axles at x = +-0.080 (wheelbase 0.160)
 HALF_TRACK = 0.0845           # wheel planes at y = +-0.0845 (track 0.169)
@@ -26,7 +28,11 @@ CHASSIS_MASS = 3.60
 BUMPER_HALF = (0.150, 0.100, 0.035)
 BUMPER_Z = -0.0005
 BATTERY_MASS = 0.35           # low, central (part of the ~4.6 kg total)
-LIDAR_POS = (0.0435, 0.0, 0.149)   # laser above the axle plane: 0.1915 m above the floor (URDF: 0.0815 + 0.11)
+# the laser's x, y in base_link: bigcbf.params.perception.X3_LASER_MOUNT (the one definition, shared with the
+# perception); its height here: above the axle plane, 0.1915 m above the floor (URDF: 0.0815 + 0.11)
+LIDAR_POS = (X3_LASER_MOUNT[0], X3_LASER_MOUNT[1], 0.149)
+if X3_LASER_MOUNT[2] != 0.0:
+    raise SystemExit("generate.py writes the lidar site without a rotation: add its yaw before changing the mount's")
 LIDAR_MASS = 0.17
 HUB_MASS = 0.060
 ROLLER_MASS = 0.005
