@@ -18,7 +18,8 @@ behind; the failure is a :class:`~bigcbf.errors.UserError` (one line on the comm
 The odometry twist is the average over the odometry period (the pose change from the previous message, in the
 body frame at mid-heading, divided by the period), as a robot's driver computes it from encoder counts; the
 instantaneous wheel speeds of the model jitter when rollers change contact (spikes of several tenths of rad/s in
-yaw rate at rest), which no encoder-based odometry reports.
+yaw rate at rest), which no encoder-based odometry reports. /odom and /imu carry the covariances of the profile's
+sensor models (:mod:`bigcbf.logio.covariance`); the averaged twist's are those at the 20 ms odometry period.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ import numpy as np
 
 from bigcbf.errors import UserError
 from bigcbf.logio import LogWriter
+from bigcbf.logio.covariance import WorldCovariances
 from bigcbf.params.robot import RobotProfile
 from bigcbf.params.toml_io import to_dict
 from bigcbf.types import RobotState
@@ -53,6 +55,7 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
         raise UserError("is a directory, expected an .mcap file path", file=str(out))
     drive = CalibrationDrive(duration_s, limits, seed, dt=CMD_EVERY * TICK_S)
     world = SimWorld(open_room(extent=ROOM_EXTENT_M), profile=profile, seed=seed)
+    cov = WorldCovariances(world)
     steps = int(round(TICK_S / world.dt))
     n_ticks = int(round(duration_s / TICK_S))
     meta = {"kind": "calibration drive", "seed": seed, "duration_s": duration_s,
@@ -66,13 +69,15 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
                 t = world.t
                 if k % ODOM_EVERY == 0:
                     odom, truth = world.odom(), world.true_state()
-                    if prev is not None:
+                    averaged = prev is not None
+                    if averaged:
                         odom = averaged_twist(prev, odom, ODOM_EVERY * TICK_S)
                     prev = odom
-                    w.odom(t, odom)
+                    pose_cov, twist_cov = cov.odom(t, odom, ODOM_EVERY * TICK_S if averaged else None)
+                    w.odom(t, odom, pose_cov=pose_cov, twist_cov=twist_cov)
                     w.tf(t, odom)
                     w.ground_truth(t, truth)
-                    w.imu(t, world.imu())
+                    w.imu(t, world.imu(), cov=cov.imu())
                     reach = max(reach, float(np.hypot(truth.px, truth.py)))
                     if reach > ROOM_EXTENT_M - 0.6 or not np.isfinite(reach):
                         raise UserError(f"the calibration drive left the room's free space at t = {t:.1f} s "

@@ -79,7 +79,8 @@ def twist_msg(u) -> dict:
 def odometry_msg(t: float, s: RobotState, frame_id: str = "odom", child_frame_id: str = "base_link",
                  pose_cov=None, twist_cov=None) -> dict:
     """RobotState -> nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP 105). Covariances:
-    6x6 row-major (x, y, z, rot x, rot y, rot z), default zero (the simulator's odometry has no noise model)."""
+    6x6 row-major (x, y, z, rot x, rot y, rot z), zero unless given (exact: the ground truth; the robot's
+    odometry gets them from its noise models, ``bigcbf.logio.covariance``)."""
     return {
         "header": _header(t, frame_id), "child_frame_id": child_frame_id,
         "pose": {"pose": {"position": _vec3((s.px, s.py, 0.0)), "orientation": yaw_quaternion(s.theta)},
@@ -104,15 +105,22 @@ def laser_scan_msg(scan: LaserScan) -> dict:
     }
 
 
-def imu_msg(t: float, imu: dict, frame_id: str = "imu_link") -> dict:
+def imu_msg(t: float, imu: dict, frame_id: str = "imu_link", cov: dict | None = None) -> dict:
     """SimWorld.imu() dict (orientation (w, x, y, z), angular_velocity, linear_acceleration) -> sensor_msgs/Imu.
 
-    Covariances are zero ("known"), as for a simulated sensor."""
-    w, x, y, z = (float(v) for v in imu["orientation"])
+    ``cov``: the three 3x3 row-major covariances by name (``orientation``, ``angular_velocity``,
+    ``linear_acceleration``; :meth:`bigcbf.logio.covariance.SensorNoise.imu_covariances`), zero unless given. An
+    orientation covariance whose element 0 is -1 says there is no orientation estimate (REP 145): the message
+    then carries the identity quaternion (ROS 2's default), not the dict's orientation."""
+    cov = cov or {}
+    oc = [float(v) for v in cov.get("orientation", [0.0] * 9)]
+    w, x, y, z = (1.0, 0.0, 0.0, 0.0) if oc[0] == -1.0 else (float(v) for v in imu["orientation"])
     return {"header": _header(t, frame_id),
-            "orientation": {"x": x, "y": y, "z": z, "w": w}, "orientation_covariance": [0.0] * 9,
-            "angular_velocity": _vec3(imu["angular_velocity"]), "angular_velocity_covariance": [0.0] * 9,
-            "linear_acceleration": _vec3(imu["linear_acceleration"]), "linear_acceleration_covariance": [0.0] * 9}
+            "orientation": {"x": x, "y": y, "z": z, "w": w}, "orientation_covariance": oc,
+            "angular_velocity": _vec3(imu["angular_velocity"]),
+            "angular_velocity_covariance": [float(v) for v in cov.get("angular_velocity", [0.0] * 9)],
+            "linear_acceleration": _vec3(imu["linear_acceleration"]),
+            "linear_acceleration_covariance": [float(v) for v in cov.get("linear_acceleration", [0.0] * 9)]}
 
 
 def tf_msg(t: float, s: RobotState, parent: str = "odom", child: str = "base_link") -> dict:

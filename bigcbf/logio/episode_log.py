@@ -7,7 +7,9 @@ base_link), /odom (the stack's state), /cmd_vel (u_safe), /cmd_vel_in (u_in), /g
 /behavior; /plan (the selected behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the
 six imagined paths of the selection) whenever they change. At every new LiDAR scan: /scan, /tracked_obstacles
 (markers), /obstacles (the estimates with their covariances) and /cbf/inflated_radius (the D_i rings of
-Eq. (14) the filter used at that step).
+Eq. (14) the filter used at that step). /odom and /imu carry the covariances of the robot profile's sensor
+models (:mod:`bigcbf.logio.covariance`); /odom's are zero when the stack runs on the ground truth
+(``--perception truth``), as is /ground_truth/odom's.
 
 Frames (REP 105): odom (the world frame at the start) -> base_link (the robot on the floor) -> laser, imu_link.
 Time base: simulation time (see :mod:`bigcbf.logio.writer`). The episode is duck-typed (``observers`` list,
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .covariance import WorldCovariances
 from .writer import LogWriter
 
 
@@ -34,6 +37,9 @@ class EpisodeLogger:
         self.writer = writer if writer is not None else LogWriter(path, metadata=meta)
         self.path = self.writer.path
         self.world = episode.world
+        # the robot's sensor covariances (bigcbf.logio.covariance); /odom is exact when the stack runs on the truth
+        self._cov = (WorldCovariances(self.world) if hasattr(self.world, "reading_intervals") else None)
+        self._odom_exact = getattr(episode, "perception_mode", "lidar") == "truth"
         self.planner = getattr(episode, "planner", None)
         self._last_scan_stamp: float | None = None
         self._last_path = None
@@ -56,9 +62,13 @@ class EpisodeLogger:
         w.tf(t, rec.state)
         w.cmd_vel(t, rec.u_safe)
         w.cmd_vel_in(t, rec.u_in)
-        w.odom(t, rec.state)
+        if self._cov is not None and not self._odom_exact:
+            pose_cov, twist_cov = self._cov.odom(t, rec.state)
+            w.odom(t, rec.state, pose_cov=pose_cov, twist_cov=twist_cov)
+        else:
+            w.odom(t, rec.state)
         w.ground_truth(t, rec.true_state)
-        w.imu(t, self.world.imu())
+        w.imu(t, self.world.imu(), cov=None if self._cov is None else self._cov.imu())
         w.behavior(t, rec.mode)
         path = getattr(rec, "path", None)
         if path is not None and len(path) > 1 and path is not self._last_path:

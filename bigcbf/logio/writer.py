@@ -15,8 +15,8 @@ Topics and the method that writes each::
     /robot_description           std_msgs/String                  robot_description()   the model's text (1)
     /tf                          tf2_msgs/TFMessage               tf()             odom -> base_link
     /scan                        sensor_msgs/LaserScan            scan()           frame laser
-    /odom                        nav_msgs/Odometry                odom()           wheel odometry, pose in odom
-    /imu                         sensor_msgs/Imu                  imu()            frame imu_link
+    /odom                        nav_msgs/Odometry                odom()           wheel odometry, pose in odom (2)
+    /imu                         sensor_msgs/Imu                  imu()            frame imu_link (2)
     /cmd_vel                     geometry_msgs/Twist              cmd_vel()        u_safe, what the robot is sent
     /cmd_vel_in                  geometry_msgs/Twist              cmd_vel_in()     u_in, before the CBF filter
     /ground_truth/odom           nav_msgs/Odometry                ground_truth()
@@ -30,6 +30,8 @@ Topics and the method that writes each::
 
 (1) written once at the start with the QoS of a latched topic (durability transient local, as rosbag2 records
 it in the channel's ``offered_qos_profiles``), so a player gives them to late subscribers.
+(2) covariances from the robot profile's sensor models when the caller gives them (the episode logger and the
+calibration recorder do: :mod:`bigcbf.logio.covariance`), else zero.
 """
 from __future__ import annotations
 
@@ -138,14 +140,19 @@ class LogWriter:
     def scan(self, t: float, scan: LaserScan, topic: str = TOPIC_SCAN) -> None:
         self.write(topic, msgdefs.LASER_SCAN, t, convert.laser_scan_msg(scan))
 
-    def odom(self, t: float, state: RobotState, topic: str = TOPIC_ODOM) -> None:
-        self.write(topic, msgdefs.ODOMETRY, t, convert.odometry_msg(t, state, self.odom_frame, self.base_frame))
+    def odom(self, t: float, state: RobotState, topic: str = TOPIC_ODOM, *, pose_cov=None, twist_cov=None) -> None:
+        """The robot's odometry; ``pose_cov``, ``twist_cov``: 6x6 covariances (zero unless given; see
+        :mod:`bigcbf.logio.covariance`)."""
+        self.write(topic, msgdefs.ODOMETRY, t, convert.odometry_msg(t, state, self.odom_frame, self.base_frame,
+                                                                    pose_cov, twist_cov))
 
     def ground_truth(self, t: float, state: RobotState, topic: str = TOPIC_GROUND_TRUTH) -> None:
         self.write(topic, msgdefs.ODOMETRY, t, convert.odometry_msg(t, state, self.odom_frame, self.base_frame))
 
-    def imu(self, t: float, imu: dict, topic: str = TOPIC_IMU, frame_id: str = "imu_link") -> None:
-        self.write(topic, msgdefs.IMU, t, convert.imu_msg(t, imu, frame_id))
+    def imu(self, t: float, imu: dict, topic: str = TOPIC_IMU, frame_id: str = "imu_link", *,
+            cov: dict | None = None) -> None:
+        """A SimWorld.imu() reading; ``cov``: its covariances by name (see :func:`bigcbf.logio.convert.imu_msg`)."""
+        self.write(topic, msgdefs.IMU, t, convert.imu_msg(t, imu, frame_id, cov))
 
     def cmd_vel(self, t: float, u, topic: str = TOPIC_CMD) -> None:
         """The command sent to the robot (u_safe), body twist (vx [m/s], vy [m/s], wz [rad/s])."""

@@ -200,6 +200,7 @@ class Encoders:
         self.angle = np.zeros(n)
         self.count = np.zeros(n)
         self.t = 0.0
+        self.last_dt = 0.0                 # the last increment's dt [s]
         self._hist: deque[tuple[float, np.ndarray]] = deque([(0.0, self.count.copy())])
 
     @property
@@ -208,6 +209,7 @@ class Encoders:
 
     def increment(self, w_mean, dt: float) -> np.ndarray:
         w_mean = np.asarray(w_mean, float)
+        self.last_dt = dt
         if self.noise_density > 0:
             self.last_noise = self.rng.standard_normal(len(self.angle)) * (self.noise_density / math.sqrt(dt))
             w_mean = w_mean + self.last_noise
@@ -233,6 +235,14 @@ class Encoders:
         (t0, c0), (t1, c1) = self._hist[0], self._hist[-1]
         return (c1 - c0) * (self.quantum / max(t1 - t0, 1e-9)) * self.scale
 
+    @property
+    def speed_interval_s(self) -> float:
+        """The interval [s] ``speed()`` averages over now: the count window, or for exact encoders the last
+        increment's (whose noise it carries); 0 before the first increment."""
+        if self.exact:
+            return self.last_dt
+        return self._hist[-1][0] - self._hist[0][0]
+
 
 class Gyro:
     """The yaw-rate gyro: mean true rate over dt + bias + white noise of density N (std N / sqrt(dt)); the bias is
@@ -247,8 +257,10 @@ class Gyro:
         if model.gyro_bias_radps:
             self.bias += model.gyro_bias_radps
         self.last_noise = 0.0
+        self.last_dt = 0.0                 # the averaging interval of the last reading [s]; 0 before the first
 
     def measure(self, rate_mean: float, dt: float) -> float:
+        self.last_dt = dt
         if self.model.gyro_noise_density_radps_rthz > 0:
             self.last_noise = float(self.rng.standard_normal()) * self.model.gyro_noise_density_radps_rthz / math.sqrt(dt)
         elif self.bias == 0.0:

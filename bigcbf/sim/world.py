@@ -168,6 +168,12 @@ class SimWorld:
         d, q = self.data, self._qadr
         return float(d.qpos[q]), float(d.qpos[q + 1]), _yaw(d.qpos[q + 3:q + 7])
 
+    def reading_intervals(self) -> tuple[float, float]:
+        """(wheels, gyro): the averaging intervals [s] of the current odometry twist (the encoders' speed window)
+        and gyro reading (the last block); 0 before the first. The logs' covariances depend on them
+        (``bigcbf.logio.covariance``)."""
+        return float(self.encoders.speed_interval_s), float(self.gyro.last_dt)
+
     def wheel_speeds(self) -> np.ndarray:
         return self.data.qvel[self._wheel_dof].copy()
 

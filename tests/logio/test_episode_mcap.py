@@ -140,3 +140,24 @@ def test_goal_plan_obstacles_and_rings_say_what_the_episode_did(episode_log):
         radius = np.hypot(*(pts - pts[:-1].mean(axis=0)[None]).T)        # (the last point closes the ring)
         D = float(m.text.split("=")[1])
         assert np.allclose(radius, D, atol=2e-3) and D > SIMULATION.uncertainty.r_robot_m + 0.1
+
+
+def test_odometry_and_imu_carry_the_robot_profiles_covariances(episode_log):
+    """The scenario's robot (x3_sim): /odom's twist covariance is its encoders' and gyro's at the 10 ms readings the
+    stack gets (bigcbf.logio.covariance), the pose covariance grows from zero (dead reckoning), /imu has no
+    orientation (REP 145) and the gyro's yaw-rate variance; /ground_truth/odom is exact."""
+    from bigcbf.logio.covariance import SensorNoise
+    from bigcbf.sim.kinematics import MecanumKinematics
+    _, sc, _, _, msgs = episode_log
+    noise = SensorNoise.from_profile(sc.robot_profile, MecanumKinematics())
+    assert noise.encoder_counts_per_rev == 1320 and noise.gyro_bias_max == 8.7e-4
+    expect = noise.twist_covariance(0.01, 0.01)
+    yaw_var = [m.pose.covariance[35] for _, m in msgs["/odom"]]
+    assert yaw_var[0] == 0.0 and np.all(np.diff(yaw_var) >= 0) and yaw_var[-1] > 0
+    for t, m in msgs["/odom"][1:]:
+        assert np.array(m.twist.covariance).reshape(6, 6) == pytest.approx(expect, rel=1e-9, abs=1e-18), t
+    for _, m in msgs["/imu"][1:]:
+        assert m.orientation_covariance[0] == -1.0 and m.orientation.w == 1.0
+        assert m.angular_velocity_covariance[8] == pytest.approx(expect[5, 5], rel=1e-9)
+    for _, m in msgs["/ground_truth/odom"]:
+        assert not np.any(m.pose.covariance) and not np.any(m.twist.covariance)
