@@ -12,6 +12,16 @@ def test_perf_json_has_the_simulator_figures(capsys):
     assert out["physics_steps_per_s"] > 1000 and 0 < out["lidar_scan_ms"] < 50
 
 
+def test_perf_episode_and_its_own_bare_physics_from_one_run(capsys):
+    """The episode's real-time factor, the bare physics of the same compiled model measured in the same run, and
+    their ratio (a figure of speed: only its consistency is checked, never a wall-clock limit)."""
+    assert main(["perf", "--json", "--quick", "--only", "bigcbf.episode_perf"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    ep, phys = out["episode_realtime_factor"], out["episode_physics_realtime_factor"]
+    assert ep > 0 and phys > 0 and out["episode_sim_time_s"] > 1.0
+    assert out["episode_physics_ratio"] == pytest.approx(ep / phys, rel=0.02, abs=2e-3)
+
+
 def test_unknown_subcommand_and_bad_argument_exit_2(capsys):
     assert main(["no-such-command"]) == 2
     assert main(["perf", "--bogus"]) == 2

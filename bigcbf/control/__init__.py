@@ -1,5 +1,5 @@
 """Robot-side BIG-CBF stack: obstacle prediction, shared uncertainty, behaviors, imagination, selection and the
-hard CBF filter. numpy / scipy / proxsuite only: no MuJoCo here (this package must run on a robot).
+hard CBF filter. numpy / scipy / numba only: no MuJoCo here (this package must run on a robot).
 
 Equation numbers in docstrings follow issue 3 (the paper's LaTeX labels in brackets):
 (1) execution model [eq:execution]; (2)-(4) obstacle prediction [eq:obs_prop, eq:cov_prop,

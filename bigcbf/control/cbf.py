@@ -1,12 +1,13 @@
-"""The hard CBF execution filter, Eqs. (18)-(19): minimum-intervention QP with proxsuite.
+"""The hard CBF execution filter, eq:cbf_condition and eq:hard_cbf_qp (Eqs. (18)-(19)): minimum-intervention QP.
 
-For each obstacle i selected for the filter, D_i^exec = r_R + r_i + d0 + kappa_exec m_i(u_in) (Eqs. 14-15) is
-evaluated from the incoming command and held fixed during the solve, which makes the CBF condition of Eq. (18)
+For each obstacle i selected for the filter, D_i^exec = r_R + r_i + d0 + kappa_exec m_i(u_in) (eq:shared_barrier,
+eq:uncertainty_margin; Eqs. 14-15) is evaluated from the incoming command and held fixed during the solve, which
+makes the CBF condition of eq:cbf_condition (Eq. 18)
 
     2 q_i^T [R(theta)(A u + d) - v_i] + alpha h_i^exec >= 0
 
 affine in u: a_i^T u >= b_i with a_i = 2 A_xy^T R(theta)^T q_i and b_i = -2 q_i^T (R(theta) d_xy - v_i) - alpha h_i.
-Rows are normalized by ||a_i|| (the violation is then in m/s). The QP (Eq. 19) is
+Rows are normalized by ||a_i|| (the violation is then in m/s). The QP (eq:hard_cbf_qp, Eq. 19) is
 
     u_safe = argmin (u - u_in)^T H (u - u_in)   s.t.  a_i^T u >= b_i for all i,  u_min <= u <= u_max.
 
@@ -17,9 +18,13 @@ beside, are always both represented). If the box-clipped u_in satisfies every ro
 diagonal, so clipping is the minimum-intervention projection onto the box) and no QP is solved; otherwise rows
 that hold for every u in the box are dropped (exactly redundant) and the QP is solved.
 
-QP objects are cached per row count and warm-started from their previous result (proxsuite's
-WARM_START_WITH_PREVIOUS_RESULT), so a changing number of constraints between calls is handled by switching
-objects, never by padding.
+The solver (``bigcbf.control.smallqp``): with 3 variables, a diagonal H and a few half-spaces, the QP is the
+projection of a point onto a polytope in R^3, solved exactly by Goldfarb and Idnani's dual active-set method,
+compiled (``bigcbf.control.jit``): a few microseconds, and the same bits in every process (proxsuite, used before,
+gave last-bit-different solutions for byte-identical inputs depending on where its buffers fell in memory, and
+chose its AVX-512, AVX2 or plain build by the CPU). proxsuite stays the reference in the tests
+(tests/control/test_smallqp.py: the same answers to 1e-9). The rows, the selection and the fault pre-check are
+compiled kernels too; the filter keeps no state between calls.
 
 Infeasibility (or a solver failure): the same QP with one slack t >= 0 shared by every row and an exact penalty,
 
@@ -28,14 +33,13 @@ Infeasibility (or a solver failure): the same QP with one slack t >= 0 shared by
 finds the least worst-case violation t* = min_u max_i (l_i - C_i u)^+ over the box and, among the commands
 attaining it, the minimum-intervention one (the penalty exceeds any multiplier of the normalized rows, so t is
 minimized first; a row with a component below ~1e-5 is the exception: the penalty then stops short of that
-component's last ~1e-6 m/s of violation, measured 1.5e-6 m/s, rather than swing u by the whole box for it). This
-problem is always feasible and well conditioned; a least-violation LP followed by a QP
-on the rows relaxed by t* is not: its feasible set shrinks to a point or a segment and the QP solver failed on
-such problems, leaving the LP's vertex, with an arbitrary yaw rate, as the command. If t* > ``FEAS_TOL`` the QP
-was infeasible (fallback "least-violation"); otherwise the solver had failed on a feasible problem and the slack
-QP's solution is the answer (fallback "qp-retry", not infeasible). If the slack QP fails too, the filter brakes
-(u = 0, inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input"). The
-output is always finite and inside the box.
+component's last ~1e-6 m/s of violation, rather than swing u by the whole box for it). This problem is always
+feasible and solved exactly by the same method (``smallqp.solve_slack``); a least-violation LP followed by a QP on
+the rows relaxed by t* is not well posed: its feasible set shrinks to a point or a segment. If t* > ``FEAS_TOL``
+the QP was infeasible (fallback "least-violation"); otherwise the solver had failed on a feasible problem and the
+slack QP's solution is the answer (fallback "qp-retry", not infeasible). If the slack QP fails too, the filter
+brakes (u = 0, inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input").
+The output is always finite and inside the box.
 
 Perception faults (``bigcbf.control.faults``): when an obstacle estimate has a NaN or an infinity anywhere (p, v,
 cov, r), or is implausible (a negative or absurd radius, a covariance that is not symmetric positive semi-definite
@@ -45,33 +49,29 @@ fallback "perception-fault" and the reason in ``FilterInfo.fault``; ``active`` s
 command. Why brake rather than drop the faulty obstacle and filter with the others: the faulty numbers may belong
 to the obstacle the robot is about to hit, and nothing tells where it is; braking is the one command that does
 not rely on them. (Before this check, a NaN made every comparison with it false: one NaN obstacle among valid ones
-let 0.8 m/s through unfiltered in 16 of 24 variants, with the filter reporting itself inactive.)
+let 0.8 m/s through unfiltered in 16 of 24 variants, with the filter reporting itself inactive.) The row kernel
+checks the plainly-usable case (every number finite and well inside the bounds) on the way; only when that fails
+does ``faults.perception_fault`` look closer.
 """
 from __future__ import annotations
 
 import math
 import time
-from bisect import bisect_right
 from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-import proxsuite
 
-from ..params.stack import ExecutionModel, StackParams
+from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
-from .faults import perception_fault
+from . import smallqp
+from .faults import MAX_COVARIANCE_M2, MAX_POSITION_M, MAX_RADIUS_M, MAX_SPEED_MPS, perception_fault
+from .jit import kernel
 
 FEAS_TOL = 1e-7        # a normalized row may be violated by this much [m/s] and still count as satisfied
-_QP_EPS = 1e-9
-_QP_MAX_ITER = 100       # outer iterations (warm-started solves here take ~5-15)
-_QP_MAX_ITER_IN = 30     # inner iterations per outer one (the default 1500 let infeasible problems run ~1 s)
-_INF = 1e20
 #: exact-penalty weight of the slack in the least-violation QP (module docstring): the rows are normalized, so
 #: their multipliers stay below 2 max(H) (|u_max - u_min| + ...) ~ 10; 1e4 leaves a wide margin
 SLACK_PENALTY = 1e4
-_T_MAX = _INF         # no upper bound on the slack (a row of a near-degenerate obstacle can need a huge one)
-_SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
 #: FilterInfo.fallback of a step braked for a perception fault (module docstring)
 PERCEPTION_FAULT = "perception-fault"
 
@@ -100,7 +100,8 @@ class CbfRows:
     """Eq. (18) for every obstacle, normalized: C_i u >= l_i with C_i = a_i / ||a_i||, l_i = b_i / ||a_i||, where
     a_i = 2 A_xy^T R(theta)^T q_i and b_i = -2 q_i^T (R(theta) d_xy - v_i) - alpha h_i; plus D^exec, h^exec and
     q (Eqs. 11-15). ``norm`` = ||a_i||; a row with norm 0 (robot center on the obstacle center) has C_i = 0 and
-    l_i = b_i (it reads 0 >= b_i)."""
+    l_i = b_i (it reads 0 >= b_i). ``margin`` = D_i - (r_R + d0) - r_i = kappa_exec m_i [m]; ``plain``: every
+    input number finite and plainly within the fault bounds (``faults._plainly_usable`` and the state's bounds)."""
 
     C: np.ndarray      # (M, 3)
     l: np.ndarray      # (M,)
@@ -108,6 +109,8 @@ class CbfRows:
     D: np.ndarray      # (M,) [m]
     h: np.ndarray      # (M,) [m^2]
     q: np.ndarray      # (M, 2) [m]
+    margin: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (M,) [m]
+    plain: bool = True
 
     @property
     def a(self) -> np.ndarray:
@@ -119,93 +122,220 @@ class CbfRows:
 
 
 @lru_cache(maxsize=64)
-def _exec_consts(ex: ExecutionModel) -> tuple:
+def _consts(params: StackParams) -> tuple:
+    """The constants of the row kernel, per parameter set: (floats, A_xy, knots, bounds, A_xy == [I 0])."""
+    unc = params.uncertainty
+    ex = unc.execution
     A = np.asarray(ex.A, float)
     ident = bool(np.array_equal(A[:2], np.eye(3)[:2]))
-    return (ident, A[:2].copy(), complex(A[0, 0], A[1, 0]), complex(A[0, 1], A[1, 1]), complex(A[0, 2], A[1, 2]),
-            complex(ex.d[0], ex.d[1]), ex.residual_horizon_s, list(ex.residual_speed_mps),
-            list(ex.residual_bound_mps))
+    k = np.array([unc.tau95_s, unc.beta, unc.e_zoh_m, unc.r_robot_m, unc.d0_m, unc.kappa_exec, params.alpha_per_s,
+                  ex.residual_horizon_s, ex.d[0], ex.d[1], MAX_POSITION_M, MAX_SPEED_MPS, MAX_RADIUS_M,
+                  MAX_COVARIANCE_M2])
+    return (k, np.ascontiguousarray(A[:2]), np.asarray(ex.residual_speed_mps, float),
+            np.asarray(ex.residual_bound_mps, float), ident)
 
 
-def _interp(x: float, xs: list, ys: list) -> float:
-    """np.interp for one scalar (clamped), without the array overhead."""
+@kernel
+def _interp(x, xs, ys):
+    """np.interp for one scalar (clamped at both ends)."""
     if x <= xs[0]:
         return ys[0]
-    j = bisect_right(xs, x)
-    if j >= len(xs):
-        return ys[-1]
+    n = xs.shape[0]
+    if x >= xs[n - 1]:
+        return ys[n - 1]
+    j = np.searchsorted(xs, x, side="right")
     t = (x - xs[j - 1]) / (xs[j] - xs[j - 1])
     return ys[j - 1] + t * (ys[j] - ys[j - 1])
 
 
-def _as_complex(xy: np.ndarray) -> np.ndarray:
-    """(M, 2) float -> (M,) complex x + i y (a view when possible)."""
-    xy = np.ascontiguousarray(xy, dtype=float)
-    return xy.view(np.complex128)[:, 0]
+@kernel
+def _rows_kernel(px, py, theta, vx, vy, wz, u0, u1, u2, P, V, cov, r, k, Axy, knots, bounds, ident):
+    """The rows of cbf_rows (eq:cbf_condition with eq:shared_barrier and eq:uncertainty_margin), and the plain
+    fault pre-check; see ``cbf_rows``."""
+    tau, beta, e_zoh, r_robot, d0, kappa, alpha = k[0], k[1], k[2], k[3], k[4], k[5], k[6]
+    horizon, d_c = k[7], complex(k[8], k[9])
+    max_pos, max_speed, max_radius, max_cov = k[10], k[11], k[12], k[13]
+    M = r.shape[0]
+    C = np.zeros((M, 3))
+    lv = np.empty(M)
+    norm = np.empty(M)
+    D = np.empty(M)
+    h = np.empty(M)
+    q = np.empty((M, 2))
+    margin = np.empty(M)
+    rot = complex(math.cos(theta), math.sin(theta))
+    cols = (complex(Axy[0, 0], Axy[1, 0]) * u0 + complex(Axy[0, 1], Axy[1, 1]) * u1
+            + complex(Axy[0, 2], Axy[1, 2]) * u2 + d_c)
+    v_rob = rot * cols                                         # Eq. (1) nominal: R(theta)(A u + d)
+    e_ex = horizon * _interp(math.hypot(u0, u1), knots, bounds)
+    rd = rot * d_c
+    base = r_robot + d0
+    # the state's plain check (faults.state_fault without a goal)
+    plain = (math.isfinite(px) and math.isfinite(py) and math.isfinite(theta) and math.isfinite(vx)
+             and math.isfinite(vy) and math.isfinite(wz) and max(abs(px), abs(py)) <= max_pos
+             and math.hypot(vx, vy) <= max_speed)
+    vlim = max_speed / math.sqrt(2.0)
+    for i in range(M):
+        qx, qy = px - P[i, 0], py - P[i, 1]                    # q_i = p - p_i (Eq. 11)
+        Vi = complex(V[i, 0], V[i, 1])
+        ca, cc, c01, c10 = cov[i, 0, 0], cov[i, 1, 1], cov[i, 0, 1], cov[i, 1, 0]
+        cb = 0.5 * (c01 + c10)
+        lam = max(0.5 * (ca + cc) + math.sqrt(0.25 * (ca - cc) ** 2 + cb * cb), 0.0)
+        m = tau * abs(v_rob - Vi) + beta * math.sqrt(lam) + (e_ex + e_zoh)    # Eq. (15)
+        Di = base + r[i] + kappa * m                                          # Eq. (14)
+        q_abs = math.hypot(qx, qy)
+        hi = q_abs * q_abs - Di * Di
+        c, s = rot.real, rot.imag
+        qb0, qb1 = qx * c + qy * s, qy * c - qx * s                           # R^T q
+        w = rd - Vi                                                           # R(theta) d - v_i
+        b = -2.0 * (qx * w.real + qy * w.imag) - alpha * hi
+        if ident:                                                             # A_xy = [I 0]: ||a_i|| = 2 ||q_i||
+            a0, a1, a2 = qb0, qb1, 0.0
+            nrm = 2.0 * q_abs
+        else:                                                                 # a_i / 2 = A_xy^T R^T q_i
+            a0 = qb0 * Axy[0, 0] + qb1 * Axy[1, 0]
+            a1 = qb0 * Axy[0, 1] + qb1 * Axy[1, 1]
+            a2 = qb0 * Axy[0, 2] + qb1 * Axy[1, 2]
+            nrm = 2.0 * math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if nrm > 1e-12:
+            half = 0.5 * nrm
+            C[i, 0], C[i, 1], C[i, 2] = a0 / half, a1 / half, a2 / half
+            lv[i] = b / nrm
+        else:
+            lv[i] = b
+        norm[i], D[i], h[i], q[i, 0], q[i, 1] = nrm, Di, hi, qx, qy
+        margin[i] = Di - base - r[i]
+        if plain:   # faults._plainly_usable, obstacle by obstacle
+            plain = (math.isfinite(P[i, 0]) and math.isfinite(P[i, 1]) and math.isfinite(V[i, 0])
+                     and math.isfinite(V[i, 1]) and math.isfinite(ca) and math.isfinite(cc)
+                     and math.isfinite(c01) and math.isfinite(c10) and math.isfinite(r[i])
+                     and abs(P[i, 0]) <= max_pos and abs(P[i, 1]) <= max_pos and abs(V[i, 0]) <= vlim
+                     and abs(V[i, 1]) <= vlim and 0.0 <= r[i] <= max_radius and c01 == c10 and ca >= 0.0
+                     and cc >= 0.0 and ca * cc >= c01 * c01 and ca + cc <= max_cov)
+    return C, lv, norm, D, h, q, margin, plain
+
+
+def _f64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def cbf_rows(state: RobotState, obstacles: Obstacles, u_ref, params: StackParams) -> CbfRows:
-    """Eq. (18) as a_i^T u >= b_i for every obstacle, with D_i^exec (Eq. 14) from m_i (Eq. 15) evaluated at u_ref
-    and held fixed. Inlines ``uncertainty.uncertainty_radius`` / ``inflated_radius`` / ``barrier`` for speed,
-    with planar vectors as complex numbers (the tests check that both agree)."""
-    unc = params.uncertainty
-    ident, Axy, col0, col1, col2, d_c, horizon, knots, bounds = _exec_consts(unc.execution)
-    u0, u1, u2 = np.asarray(u_ref, float).tolist()
-    rot = complex(math.cos(state.theta), math.sin(state.theta))
-    v_rob = rot * (col0 * u0 + col1 * u1 + col2 * u2 + d_c)      # Eq. (1) nominal: R(theta)(A u + d)
-    e_ex = horizon * _interp(math.hypot(u0, u1), knots, bounds)
-    q = complex(state.px, state.py) - _as_complex(obstacles.p)      # q_i = p - p_i (Eq. 11)
-    V = _as_complex(obstacles.v)
-    cov = obstacles.cov
-    ca, cc = cov[:, 0, 0], cov[:, 1, 1]
-    cb = 0.5 * (cov[:, 0, 1] + cov[:, 1, 0])
-    lam = np.maximum(0.5 * (ca + cc) + np.sqrt(0.25 * (ca - cc) ** 2 + cb * cb), 0.0)
-    m = unc.tau95_s * np.abs(v_rob - V) + unc.beta * np.sqrt(lam) + (e_ex + unc.e_zoh_m)   # Eq. (15)
-    D = (unc.r_robot_m + unc.d0_m) + obstacles.r + unc.kappa_exec * m                     # Eq. (14)
-    q_abs = np.abs(q)
-    h = q_abs * q_abs - D * D
-    qb = (q * rot.conjugate()).view(float).reshape(-1, 2)           # R^T q
-    w = rot * d_c - V                                               # R(theta) d - v_i
-    b = -2.0 * (q.real * w.real + q.imag * w.imag) - params.alpha_per_s * h
-    if ident:                                                       # A_xy = [I 0]: ||a_i|| = 2 ||q_i||
-        C = np.zeros((len(q), 3))
-        C[:, :2] = qb
-        norm = 2.0 * q_abs
+    """eq:cbf_condition (Eq. 18) as a_i^T u >= b_i for every obstacle, with D_i^exec (eq:shared_barrier, Eq. 14)
+    from m_i (eq:uncertainty_margin, Eq. 15) evaluated at u_ref and held fixed. A compiled kernel that inlines
+    ``uncertainty.uncertainty_radius`` / ``inflated_radius`` / ``barrier`` (the tests check that both agree)."""
+    k, Axy, knots, bounds, ident = _consts(params)
+    u0, u1, u2 = np.asarray(u_ref, float).reshape(3).tolist()
+    C, lv, norm, D, h, q, margin, plain = _rows_kernel(
+        float(state.px), float(state.py), float(state.theta), float(state.vx), float(state.vy), float(state.wz),
+        u0, u1, u2, _f64(obstacles.p), _f64(obstacles.v), _f64(obstacles.cov), _f64(obstacles.r), k, Axy, knots,
+        bounds, ident)
+    return CbfRows(C, lv, norm, D, h, q, margin, bool(plain))
+
+
+@kernel
+def _select_kernel(ids, h, q, max_rows, K):
+    """select_constraints on arrays: the indices in increasing order."""
+    M = ids.shape[0]
+    all_tracked = True
+    for i in range(M):
+        if ids[i] < 0:
+            all_tracked = False
+            break
+    if M <= max_rows and all_tracked:
+        return np.arange(M)
+    keep = np.zeros(M, np.bool_)
+    nt = 0
+    for i in range(M):
+        if ids[i] >= 0:
+            nt += 1
+    tracked = np.empty(nt, np.int64)
+    j = 0
+    for i in range(M):
+        if ids[i] >= 0:
+            tracked[j] = i
+            j += 1
+    if nt > max_rows:
+        order = np.argsort(h[tracked], kind="mergesort")      # stable: equal h keep their order
+        for j in range(max_rows):
+            keep[tracked[order[j]]] = True
     else:
-        C = qb @ Axy                                                # a_i / 2 = A_xy^T R^T q_i
-        norm = 2.0 * np.sqrt((C * C).sum(axis=1))
-    if norm.min(initial=1.0) > 1e-12:
-        C /= 0.5 * norm[:, None]
-        lv = b / norm
-    else:
-        pos = norm > 1e-12
-        C[pos] /= 0.5 * norm[pos, None]
-        C[~pos] = 0.0
-        lv = np.where(pos, b / np.where(pos, norm, 1.0), b)
-    return CbfRows(C, lv, norm, D, h, q.view(float).reshape(-1, 2))
+        for j in range(nt):
+            keep[tracked[j]] = True
+    if K > 0:
+        best = np.full(K, -1, np.int64)
+        scale = K / (2 * np.pi)
+        for i in range(M):
+            if ids[i] >= 0:
+                continue
+            bearing = math.atan2(-q[i, 1], -q[i, 0])                  # direction robot -> point
+            s = int(math.floor((bearing + np.pi) * scale)) % K
+            if best[s] < 0 or h[i] < h[best[s]]:                   # nearest in its sector, first among equals
+                best[s] = i
+        for s in range(K):
+            if best[s] >= 0:
+                keep[best[s]] = True
+    return np.flatnonzero(keep)
 
 
 def select_constraints(obstacles: Obstacles, rows: CbfRows, params: StackParams) -> np.ndarray:
     """Indices of the obstacles that become CBF rows (see the module docstring), in increasing order."""
-    ids = np.asarray(obstacles.ids)
-    M = len(ids)
-    if M <= params.max_obstacle_constraints and (M == 0 or ids.min() >= 0):
-        return np.arange(M)
-    tracked = np.flatnonzero(ids >= 0)
-    if len(tracked) > params.max_obstacle_constraints:
-        tracked = tracked[np.argsort(rows.h[tracked], kind="stable")[:params.max_obstacle_constraints]]
-    walls = np.flatnonzero(ids < 0)
-    if len(walls) and params.wall_sectors > 0:
-        K = params.wall_sectors
-        bearing = np.arctan2(-rows.q[walls, 1], -rows.q[walls, 0])    # direction robot -> point
-        sector = np.floor((bearing + np.pi) * (K / (2 * np.pi))).astype(int) % K
-        order = np.lexsort((rows.h[walls], sector))
-        first = np.ones(len(order), bool)
-        first[1:] = sector[order][1:] != sector[order][:-1]
-        walls = walls[order[first]]
-    else:
-        walls = walls[:0]
-    return np.sort(np.concatenate([tracked, walls]))
+    ids = np.ascontiguousarray(obstacles.ids, dtype=np.int64)
+    return _select_kernel(ids, _f64(rows.h), _f64(rows.q), int(params.max_obstacle_constraints),
+                          int(params.wall_sectors))
+
+
+@kernel
+def _prepare(C, lv, idx, u_in, lo, hi, feas_tol):
+    """The selected rows (C_k, l_k), u_in clipped to the box and its largest row violation; when a row is violated
+    by more than feas_tol, only the rows that can be violated inside the box (the others hold over the whole box:
+    dropped), and whether one of those holds nowhere in the box (the QP is infeasible: no solve)."""
+    n = idx.shape[0]
+    u = np.empty(3)
+    for j in range(3):
+        u[j] = min(max(u_in[j], lo[j]), hi[j])
+    viol = 0.0
+    for k in range(n):
+        i = idx[k]
+        v = lv[i] - (C[i, 0] * u[0] + C[i, 1] * u[1] + C[i, 2] * u[2])
+        if k == 0 or v > viol:
+            viol = v
+    active = n > 0 and viol > feas_tol
+    live = np.ones(n, np.bool_)
+    hopeless = False
+    if active:
+        # over the box, C_i u ranges over C_i c -+ |C_i| w (c centre, w half-width)
+        for k in range(n):
+            i = idx[k]
+            centre = 0.0
+            spread = 0.0
+            for j in range(3):
+                centre += C[i, j] * (0.5 * (lo[j] + hi[j]))
+                spread += abs(C[i, j]) * (0.5 * (hi[j] - lo[j]))
+            live[k] = centre - spread < lv[i]
+            if live[k] and centre + spread < lv[i] - feas_tol:
+                hopeless = True
+    sel = idx[live]
+    Ck = np.empty((sel.shape[0], 3))
+    lk = np.empty(sel.shape[0])
+    for k in range(sel.shape[0]):
+        for j in range(3):
+            Ck[k, j] = C[sel[k], j]
+        lk[k] = lv[sel[k]]
+    return u, viol, active, Ck, lk, sel, hopeless
+
+
+@kernel
+def _clip_violation(C, lv, x, lo, hi):
+    """x clipped to the box and the largest row violation there (-inf without rows)."""
+    u = np.empty(3)
+    for j in range(3):
+        u[j] = min(max(x[j], lo[j]), hi[j])
+    viol = -np.inf
+    for k in range(lv.shape[0]):
+        v = lv[k] - (C[k, 0] * u[0] + C[k, 1] * u[1] + C[k, 2] * u[2])
+        if v > viol:
+            viol = v
+    return u, viol
 
 
 class CbfFilter:
@@ -216,84 +346,29 @@ class CbfFilter:
         self.lo = np.asarray(params.u_min, float)
         self.hi = np.asarray(params.u_max, float)
         self.Hd = np.asarray(params.H_diag, float)
-        self._H = np.diag(2.0 * self.Hd)
-        self._minus2Hd = -2.0 * self.Hd
-        self._centre = 0.5 * (self.lo + self.hi)
-        self._half = 0.5 * (self.hi - self.lo)
-        self._qps: dict[int, tuple] = {}
-        self._slack_qps: dict[int, tuple] = {}
-        self._H_slack = np.diag(np.r_[2.0 * self.Hd, 0.0])
-        self._lo_slack, self._hi_slack = np.r_[self.lo, 0.0], np.r_[self.hi, _T_MAX]
+        unc = params.uncertainty
+        self._base = unc.r_robot_m + unc.d0_m
 
     def reset(self) -> None:
-        """Forget the warm starts (a new episode)."""
-        self._qps.clear()
-        self._slack_qps.clear()
+        """A new episode. The filter keeps no state between calls (the exact solver needs no warm start)."""
 
-    def _new_qp(self, n: int, nvar: int = 3):
-        qp = proxsuite.proxqp.dense.QP(nvar, 0, n, True)
-        st = qp.settings
-        st.eps_abs = _QP_EPS
-        st.eps_rel = 0.0
-        st.eps_primal_inf = 1e-8
-        st.eps_dual_inf = 1e-8
-        st.max_iter = _QP_MAX_ITER
-        st.max_iter_in = _QP_MAX_ITER_IN
-        # without the duality-gap test, degenerate problems (parallel rows) stopped ~1e-5 m/s from the optimum
-        st.check_duality_gap = True
-        st.eps_duality_gap_abs = _QP_EPS
-        st.eps_duality_gap_rel = 0.0
-        st.verbose = False
-        st.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-        return qp
-
-    def _solve_qp(self, C, lvec, u_target, cache: bool) -> np.ndarray | None:
-        """Eq. (19) with proxsuite; None when the solver does not report a solution."""
-        n = len(lvec)
-        g = self._minus2Hd * u_target
-        entry = self._qps.get(n) if cache else None
-        if entry is None:
-            qp, uvec = self._new_qp(n), np.full(n, _INF)
-            qp.init(self._H, g, None, None, C, lvec, uvec, self.lo, self.hi)
-            if cache:
-                self._qps[n] = (qp, uvec)
-        else:
-            qp, uvec = entry
-            qp.update(g=g, C=C, l=lvec)
-        qp.solve()
-        res = qp.results
-        if res.info.status != _SOLVED:
-            if cache:
-                self._qps.pop(n, None)       # do not warm-start from a failed solve
+    def _solve_qp(self, C, lvec, u_target, cache: bool = True) -> np.ndarray | None:
+        """Eq. (19), exactly (``smallqp.solve_hard``); None when the solver reports no solution (infeasible, or its
+        iteration limit). ``cache`` is accepted for the callers of the earlier warm-started solver."""
+        status, x = smallqp.solve_hard(C, lvec, u_target, self.Hd, self.lo, self.hi)
+        if status != smallqp.OK or not np.isfinite(x).all():
             return None
-        x = np.array(res.x)
-        return x if np.isfinite(x).all() else None
+        return x
 
     def _least_violation(self, C, lvec, u_in) -> tuple[float, np.ndarray] | None:
-        """The slack QP of the module docstring (proxsuite, warm-started per row count). Returns (t*, u) or
-        None when the solver fails."""
-        n = len(lvec)
-        Ca = np.hstack([C, np.ones((n, 1))])
-        g = np.r_[self._minus2Hd * u_in, SLACK_PENALTY]
-        entry = self._slack_qps.get(n)
-        if entry is None:
-            qp = self._new_qp(n, 4)
-            qp.init(self._H_slack, g, None, None, Ca, lvec, np.full(n, _INF), self._lo_slack, self._hi_slack)
-            self._slack_qps[n] = (qp,)
-        else:
-            qp = entry[0]
-            qp.update(g=g, C=Ca, l=lvec)
-        qp.solve()
-        res = qp.results
-        x = np.array(res.x)
-        if res.info.status != _SOLVED:
-            self._slack_qps.pop(n, None)      # do not warm-start from an unfinished solve
-        # this problem is always feasible: an unfinished solve (the iteration limit, e.g. with a row of a robot
-        # sitting on an obstacle's centre, l_i ~ 1e6) still gives a usable command; its violation is measured
+        """The slack QP of the module docstring (``smallqp.solve_slack``). Returns (t*, u) or None when the solver
+        gives no finite command."""
+        status, x, _ = smallqp.solve_slack(C, lvec, u_in, self.Hd, self.lo, self.hi, SLACK_PENALTY)
+        # an unfinished solve (the iteration limit) still gives a command; its violation is measured
         if not np.isfinite(x).all():
             return None
-        u = np.minimum(np.maximum(x[:3], self.lo), self.hi)
-        return max(float((lvec - C @ u).max()), 0.0), u
+        u, viol = _clip_violation(C, lvec, x, self.lo, self.hi)
+        return max(float(viol), 0.0), u
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
         """Eqs. (18)-(19): the minimum-intervention safe command u_safe (3,) and what the filter did."""
@@ -302,47 +377,31 @@ class CbfFilter:
         fallback = None
         if not np.isfinite(u_in).all():
             u_in, fallback = np.zeros(3), "invalid-input"
-        fault = perception_fault(state, obstacles)
-        if fault is not None:
-            return self._brake_for_fault(u_in, obstacles, fault, t0)
         rows = cbf_rows(state, obstacles, u_in, self.params)
+        if not rows.plain:
+            fault = perception_fault(state, obstacles)
+            if fault is not None:
+                return self._brake_for_fault(u_in, obstacles, fault, t0)
         idx = select_constraints(obstacles, rows, self.params)
-        unc = self.params.uncertainty
-        margins = rows.D[idx] - (unc.r_robot_m + unc.d0_m) - obstacles.r[idx]
-        if len(idx) < len(rows.l):
-            C, lvec = rows.C[idx], rows.l[idx]
-        else:
-            C, lvec = rows.C, rows.l
-        u = np.minimum(np.maximum(u_in, self.lo), self.hi)
-        viol = float((lvec - C @ u).max()) if len(lvec) else 0.0
-        active = viol > FEAS_TOL
+        margins = rows.margin[idx]
+        u, viol, active, C, lvec, idx, hopeless = _prepare(rows.C, rows.l, np.asarray(idx, np.int64), u_in, self.lo,
+                                                           self.hi, FEAS_TOL)
         infeasible = False
         if active:
-            # over the box, C_i u ranges over C_i c -+ |C_i| w (c centre, w half-width): rows whose minimum is
-            # >= l_i hold everywhere (redundant, dropped); rows whose maximum is < l_i hold nowhere (the QP is
-            # infeasible: the solver is skipped)
-            centre = C @ self._centre
-            spread = np.abs(C) @ self._half
-            live = centre - spread < lvec
-            if not live.all():
-                C, lvec, idx, centre, spread = C[live], lvec[live], idx[live], centre[live], spread[live]
-            hopeless = centre + spread < lvec - FEAS_TOL
-            x = None if hopeless.any() else self._solve_qp(C, lvec, u_in, cache=True)
+            x = None if hopeless else self._solve_qp(C, lvec, u_in, cache=True)
             if x is not None:
-                x = np.minimum(np.maximum(x, self.lo), self.hi)
-                viol = float((lvec - C @ x).max())
+                x, viol = _clip_violation(C, lvec, x, self.lo, self.hi)
             if x is not None and viol <= 1e-6:
                 u = x
             else:
                 u, fallback, infeasible = self._infeasible(C, lvec, u_in, fallback)
                 if not np.isfinite(u).all():
                     u, fallback = np.zeros(3), "brake"
-                u = np.minimum(np.maximum(u, self.lo), self.hi)
-                viol = float((lvec - C @ u).max())
+                u, viol = _clip_violation(C, lvec, u, self.lo, self.hi)
         h = rows.h
-        info = FilterInfo(active=active, infeasible=infeasible, fallback=fallback,
+        info = FilterInfo(active=bool(active), infeasible=infeasible, fallback=fallback,
                           solve_ms=(time.perf_counter() - t0) * 1e3, n_constraints=len(lvec),
-                          h_min=float(h.min()) if len(h) else math.inf, D=rows.D, max_violation=max(viol, 0.0),
+                          h_min=float(h.min()) if len(h) else math.inf, D=rows.D, max_violation=max(float(viol), 0.0),
                           rows=idx, margins=margins)
         return u, info
 

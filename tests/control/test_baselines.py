@@ -7,9 +7,11 @@ from bigcbf.control import METHODS, PlanInfo, Planner
 from bigcbf.control.baselines import BASELINES
 from bigcbf.control.baselines.apf import ApfParams, attractive_velocity, repulsive_velocity
 from bigcbf.control.baselines.backup_cbf import BackupCbfPlanner
-from bigcbf.control.baselines.common import Geometry, accel_limited, barrier_along, integrate, predict
+from bigcbf.control.baselines.common import (Geometry, accel_limited, barrier_along, body_from_world, integrate,
+                                             predict, world_velocity)
 from bigcbf.control.baselines.dwa import DwaParams, window_samples
-from bigcbf.control.baselines.mppi import MppiPlanner, effective_sample_size, mppi_weights, temperature
+from bigcbf.control.baselines.mppi import (MppiPlanner, effective_sample_size, mppi_weights, sample_sequences,
+                                           temperature)
 from bigcbf.control.baselines.pl_cbf import PlCbfPlanner
 from bigcbf.control.baselines.shield import rollout
 from bigcbf.params import SIMULATION
@@ -208,3 +210,54 @@ def test_mppi_open_floor_command_is_smooth():
     bad = Obstacles.from_lists([[np.nan, 0.0]], r=0.2)
     u, _ = pl.plan(2.0, state, bad, np.array([8.0, 0.0]))
     assert np.all(np.isfinite(pl.V)) and np.all(np.isfinite(u))
+
+
+def mppi_costs_numpy(pl: MppiPlanner, Vs, eps, state, pred, goal):
+    """MPPI's cost S(V^s) written with numpy arrays over samples, steps and obstacles (the implementation before
+    the compiled kernel): an independent computation of the same formulas (bigcbf.control.baselines.mppi)."""
+    p, mp = pl.params, pl.mppi
+    dt = p.dt_s
+    U = body_from_world(state.theta, Vs)
+    paths, _ = integrate(state, U, dt, p)
+    dg = np.hypot(*(paths - goal).transpose(2, 0, 1))
+    cost = mp.w_goal * dt * dg[:, 1:].sum(axis=1) + mp.w_term * dg[:, -1]
+    if pred.M:
+        h = barrier_along(paths, pred, p, Geometry(mp.margin_m))[:, 1:]
+        qn = np.hypot(*(paths[:, 1:, None, :] - pred.p[None, 1:]).transpose(3, 0, 1, 2))
+        d = (qn - np.sqrt(np.maximum(qn * qn - h, 0.0))).min(axis=2)
+        cost += dt * (mp.w_coll * (d < 0).sum(axis=1) + mp.w_clear * np.exp(-np.maximum(d, 0.0) / mp.l_clear_m).sum(axis=1))
+    v_prev = np.concatenate([np.broadcast_to(world_velocity(state), (len(Vs), 1, 2)), Vs[:, :-1]], axis=1)
+    cost += mp.w_smooth * ((Vs - v_prev) ** 2).sum(axis=(1, 2))
+    cost += mp.gamma * (pl.V[None] * eps).sum(axis=(1, 2)) / mp.sigma_mps ** 2
+    return cost, paths
+
+
+def test_mppi_compiled_costs_match_the_array_formulas():
+    """The compiled rollout cost gives the array version's costs and paths to 1e-12 (relative) on random scenes:
+    moving and static obstacles, a calibrated execution model (A != I, d != 0), a warm-started mean, and a
+    non-finite obstacle estimate (a non-finite cost for every sample in both)."""
+    import dataclasses
+    rng = np.random.default_rng(3)
+    ex = dataclasses.replace(P.uncertainty.execution, A=((0.95, 0.02, 0.01), (-0.03, 0.9, 0.02), (0.05, -0.04, 0.92)),
+                             d=(0.01, -0.02, 0.03))
+    params = [P, dataclasses.replace(P, uncertainty=dataclasses.replace(P.uncertainty, execution=ex))]
+    for trial in range(24):
+        pl = MppiPlanner(params[trial % 2])
+        pl.reset(trial)
+        pl.V = rng.normal(0.0, 0.3, pl.V.shape)
+        state = RobotState(*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi), *rng.normal(0, 0.3, 3))
+        M = int(rng.integers(0, 9))
+        obs = Obstacles.from_lists(rng.uniform(-3, 3, (M, 2)), v=rng.normal(0, 0.5, (M, 2)),
+                                   r=rng.uniform(0.05, 0.4, M), cov=np.eye(2) * 0.01)
+        if trial == 23:
+            obs = Obstacles.from_lists([[np.nan, 1.0], [1.0, 1.0]], r=0.2)
+        pred = predict(obs, pl.params)
+        Vs, eps = sample_sequences(pl.V, pl.rng, pl.params.v_max_mps, pl.mppi)
+        goal = rng.uniform(-4, 4, 2)
+        S, paths = pl.costs(Vs, eps, state, pred, goal)
+        S_ref, paths_ref = mppi_costs_numpy(pl, Vs, eps, state, pred, goal)
+        if trial == 23:
+            assert not np.isfinite(S).any() and not np.isfinite(S_ref).any()
+            continue
+        np.testing.assert_allclose(paths, paths_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(S, S_ref, rtol=1e-12, atol=1e-12)
