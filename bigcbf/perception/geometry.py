@@ -189,7 +189,7 @@ def _edge_distances(points: np.ndarray, e1: np.ndarray, e2: np.ndarray):
     return amin, amax, bmin, bmax, d
 
 
-def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, float, float]:
+def fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):
     """Rectangle (L-shape) fit: the orientation whose bounding rectangle the points hug best, i.e. the least sum of
     squared distances from each point to the nearest edge (a search-based L-shape fit in the manner of Zhang et al.
     2017, "Efficient L-shape fitting for vehicle detection using laser scanners", with a squared-distance criterion;
@@ -199,7 +199,8 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, f
     second face of an L seen at a grazing angle is sampled by few beams (its length is underestimated by up to one
     beam spacing along it). The rectangle is therefore completed into a square of its long side, extending away
     from the sensor: exact for square boxes, conservative for an L of an oblong box. Returns (center (2,),
-    radius = half the square's diagonal, rms of the points' distance to the nearest edge).
+    radius = half the square's diagonal, rms of the points' distance to the nearest edge); with ``full`` also the
+    axes (2, 2) (rows e1, e2) and the points' extents (la, lb) along them.
     """
     *_, d = _edge_distances(points, _COARSE_E1, _COARSE_E2)
     ang = _COARSE[int(np.argmin(np.einsum("kn,kn->k", d, d)))] + _FINE
@@ -216,7 +217,79 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, f
     if normal @ (center - sensor) < 0:
         normal = -normal
     center = center + (long_ - short) / 2 * normal
+    if full:
+        return center, long_ / np.sqrt(2), rms, np.stack([e1, e2]), (la, lb)
     return center, long_ / np.sqrt(2), rms
+
+
+def point_variances(points: np.ndarray, normals: np.ndarray, sensor: np.ndarray, angle_increment: float,
+                    params: PerceptionParams) -> np.ndarray:
+    """Variance [m^2] of each LiDAR point's offset along the model's surface normal there (unit ``normals`` (n,2)):
+    the range noise along the beam, sigma_r = range_sigma_m + range_sigma_frac r, and the beam's angular
+    resolution across it, sigma_t = r dphi / sqrt(12) (as ``wall_point_covariance``), projected on the normal:
+    sigma_r^2 cos^2 a + sigma_t^2 sin^2 a, a the angle between the beam and the normal."""
+    b = points - sensor
+    r = np.sqrt(b[:, 0] * b[:, 0] + b[:, 1] * b[:, 1])
+    cos = (b[:, 0] * normals[:, 0] + b[:, 1] * normals[:, 1]) / np.maximum(r, 1e-12)
+    cos2 = np.minimum(cos * cos, 1.0)
+    sr = params.range_sigma_m + params.range_sigma_frac * r
+    return sr * sr * cos2 + (r * angle_increment) ** 2 / 12.0 * (1.0 - cos2)
+
+
+def circle_fit_covariance(points: np.ndarray, center: np.ndarray, radius: float, sensor: np.ndarray,
+                          angle_increment: float, params: PerceptionParams, fit_radius: bool = True) -> np.ndarray:
+    """Covariance (2, 2) [m^2] of a circle fit's centre: the weighted least-squares covariance (J^T W J)^-1 of the
+    geometric fit (residuals e_i = |p_i - c| - r, J_i = d e_i / d(c_x, c_y, r) = (-n_i, -1) with n_i the outward
+    normal at point i, W = diag(1 / var_i) from :func:`point_variances`), its centre block; with the radius free
+    (``fit_radius``) the radius's uncertainty is marginalised in, which is what makes a short arc's centre
+    uncertain along the line of sight. With the radius clamped (not fitted) the centre moves one for one with the
+    unknown radius along the line of sight: a uniform spread over [radius_min_m, radius_max_m] is added there.
+    Standard deviations are capped at radius_max_m (the centre lies within that of the seen surface)."""
+    u = points - center
+    d = np.maximum(np.sqrt(u[:, 0] * u[:, 0] + u[:, 1] * u[:, 1]), 1e-12)
+    nrm = u / d[:, None]
+    w = 1.0 / np.maximum(point_variances(points, nrm, sensor, angle_increment, params), 1e-12)
+    J = np.column_stack([-nrm, -np.ones(len(points))])
+    A = (J * w[:, None]).T @ J
+    cap = params.radius_max_m ** 2
+    try:
+        C = np.linalg.inv(A)[:2, :2] if fit_radius else np.linalg.inv(A[:2, :2])
+    except np.linalg.LinAlgError:
+        return cap * np.eye(2)
+    if not fit_radius:
+        ray = center - sensor
+        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    C = 0.5 * (C + C.T)
+    if not np.all(np.isfinite(C)):
+        return cap * np.eye(2)
+    return _cap_std(C, params.radius_max_m)
+
+
+def _cap_std(C: np.ndarray, sigma_max: float) -> np.ndarray:
+    """Scale a 2x2 covariance down so that its largest standard deviation is at most sigma_max."""
+    a, b, c = C[0, 0], C[0, 1], C[1, 1]
+    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return C * (sigma_max ** 2 / lam) if lam > sigma_max ** 2 else C
+
+
+def rectangle_covariance(points: np.ndarray, axes: np.ndarray, lengths: tuple[float, float], sensor: np.ndarray,
+                         angle_increment: float, params: PerceptionParams) -> np.ndarray:
+    """Covariance (2, 2) [m^2] of a rectangle fit's centre (``fit_rectangle``). Along each of the rectangle's axes
+    e_k (``axes`` (2, 2), rows) the centre is the middle of the points' extent: each end is known to within the
+    range noise and the beam spacing at the cluster's range (the silhouette lies between two beams: a uniform
+    spread of r dphi), and the depth that no beam sees is unknown: the rectangle was completed into a square of
+    its long side (``fit_rectangle``), so along the shorter extent the centre may lie anywhere over the missing
+    length (long - short), a uniform spread (long - short)^2 / 12."""
+    r = float(np.mean(np.linalg.norm(points - sensor, axis=1)))
+    sr = params.range_sigma_m + params.range_sigma_frac * r
+    end = sr * sr + (r * angle_increment) ** 2 / 12.0                 # one end of the extent
+    la, lb = lengths
+    short, long_ = min(la, lb), max(la, lb)
+    var = np.full(2, 0.5 * end)                                        # the middle of two ends: (2 end) / 4
+    var[int(np.argmin([la, lb]))] += (long_ - short) ** 2 / 12.0
+    C = axes.T @ np.diag(var) @ axes
+    return _cap_std(0.5 * (C + C.T), params.radius_max_m)
 
 
 @dataclass(frozen=True)
@@ -224,11 +297,16 @@ class Measurement:
     center: np.ndarray       # (2,) odom [m]
     radius: float            # [m]
     arc_fit: bool            # True: the circle model won; False: the rectangle model
+    cov: np.ndarray = None   # (2, 2) covariance of the centre [m^2] (circle_fit_covariance / rectangle_covariance)
+    rms: float = 0.0         # RMS residual of the winning model [m]
+    rms_expected: float = 0.0  # the RMS residual the sensor's noise alone would give there [m]
+    round: bool = False      # the circle model explained the points outright: won, and without the tie tolerance
 
 
 def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionParams,
                     occluded: bool = False, angle_increment: float = 2 * np.pi / 360) -> Measurement:
-    """Centre and radius of a compact cluster: the better of a circle model and a rectangle model.
+    """Centre, radius and centre covariance of a compact cluster: the better of a circle model and a rectangle
+    model.
 
     The centroid of an arc seen from one side is biased toward the sensor (by 2r/pi for a half circle), so it is
     not used. Circle model: the algebraic fit (``fit_circle``); when its radius falls outside [radius_min_m,
@@ -245,7 +323,13 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
       spacing at each silhouette). A flat face fits a wide circle with a narrow arc; a real circle shows nearly
       half of itself.
 
-    The radius is clamped to [radius_min_m, radius_max_m].
+    The radius is clamped to [radius_min_m, radius_max_m]. The centre's covariance is the winning model's
+    (``circle_fit_covariance``, ``rectangle_covariance``): a far post seen by four beams is a much poorer
+    measurement than a near one seen by thirty, and the tracker weighs (and gates) it accordingly. ``rms`` is the
+    winning model's RMS residual and ``rms_expected`` the range noise's std at the cluster's mean range: a cluster
+    that no model explains (two objects merged, ``Perception``) has rms far above it. ``round``: the circle model
+    won outright (also without the tie tolerance, or it fit within the noise): the evidence the tracker uses for the
+    object's shape (a box seen by few beams often wins the circle model on the tie tolerance only).
     """
     dx, dy = points[:, 0] - sensor[0], points[:, 1] - sensor[1]
     dist = np.sqrt(dx * dx + dy * dy)
@@ -253,15 +337,20 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
     near = points[k]
     ray = (near - sensor) / max(float(dist[k]), 1e-9)
     c, r, rms = fit_circle(points)
-    tol = params.range_sigma_m + params.range_sigma_frac * float(dist.mean())
+    sigma = params.range_sigma_m + params.range_sigma_frac * float(dist.mean())
+    tol = sigma
+    fitted = True
     if not (np.isfinite(r) and params.radius_min_m <= r <= params.radius_max_m and ray @ (c - near) > 0):
         r = float(np.clip(r if np.isfinite(r) else params.radius_max_m, params.radius_min_m, params.radius_max_m))
         c, rms = fit_circle_fixed_radius(points, r, near + r * ray)
         tol = 0.0
+        fitted = False
     if tol > 0 and rms <= tol:
-        rms_rect = np.inf                   # rms <= rms_rect + tol holds whatever the rectangle: skip its search
+        rect = None                         # rms <= rms_rect + tol holds whatever the rectangle: skip its search
+        rms_rect = np.inf
     else:
-        rc, rr, rms_rect = fit_rectangle(points, sensor)
+        rect = fit_rectangle(points, sensor, full=True)
+        rms_rect = rect[2]
     if rms <= rms_rect + tol and ray @ (c - near) > 0:
         u = points - c
         mid = u.mean(axis=0)
@@ -272,15 +361,39 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
             sampled = min(np.arccos(min(r / d, 1.0)), np.arcsin(np.clip((r - d * angle_increment) / r, 0.0, 1.0)))
             need = max(need, params.fit_span_ratio * 2 * sampled)
         if span >= need:
-            return Measurement(c, r, True)
-    if not np.isfinite(rms_rect):
-        rc, rr, _ = fit_rectangle(points, sensor)
-    return Measurement(rc, float(np.clip(rr, params.radius_min_m, params.radius_max_m)), False)
+            cov = circle_fit_covariance(points, c, r, sensor, angle_increment, params, fit_radius=fitted)
+            return Measurement(c, r, True, cov, float(rms), sigma, bool(rms <= rms_rect))
+    if rect is None:
+        rect = fit_rectangle(points, sensor, full=True)
+    rc, rr, rms_rect, axes, lengths = rect
+    cov = rectangle_covariance(points, axes, lengths, sensor, angle_increment, params)
+    return Measurement(rc, float(np.clip(rr, params.radius_min_m, params.radius_max_m)), False, cov,
+                       float(rms_rect), sigma)
+
+
+def concavity(points: np.ndarray, sensor: np.ndarray, k: int = 2) -> float:
+    """How far [m] the cluster's outline (points in scan order) dents away from the sensor: the largest distance of
+    a point p_i behind the chord from p_(i-k) to p_(i+k), counted positive away from the sensor (0 when no point
+    is). A convex object seen from outside (a post, a box, a person) bulges toward the sensor everywhere, so this is
+    noise only; where two objects meet in one cluster (a pedestrian beside a post, two posts a few cm apart) the
+    outline steps back into the gap between them. k = 2 skips one point, so that one noisy return does not make
+    a dent."""
+    n = len(points)
+    if n < 2 * k + 1:
+        return 0.0
+    a, b, c = points[: n - 2 * k], points[k: n - k], points[2 * k:]
+    ex, ey = c[:, 0] - a[:, 0], c[:, 1] - a[:, 1]
+    length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
+    side_b = ex * (b[:, 1] - a[:, 1]) - ey * (b[:, 0] - a[:, 0])
+    side_s = ex * (sensor[1] - a[:, 1]) - ey * (sensor[0] - a[:, 0])
+    return float(max(np.max(-np.sign(side_s) * side_b / length), 0.0))
 
 
 def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) -> np.ndarray:
-    """Points of one wall cluster (scan order) that represent it: the point nearest to the robot, then, walking
-    along the cluster in both directions, the first point past every multiple of ``spacing`` of path length."""
+    """Points of one cluster (scan order) that represent its surface: the point nearest to the robot, then, walking
+    along the cluster in both directions, the first point past every multiple of ``spacing`` of path length, and
+    the cluster's two end points (a wall's end at a door, a box's corners: between the nearest point and an end
+    closer than ``spacing`` no bin would start, and a 0.4 m box face seen square-on would be one point)."""
     n = len(points)
     if n <= 1:
         return points
@@ -294,6 +407,7 @@ def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) ->
     keep[j] = True
     keep[j + 1:] = bins[j + 1:] != bins[j:-1]                         # forward: first point of each new bin
     keep[:j] = bins[:j] != bins[1:j + 1]                              # backward, likewise
+    keep[0] = keep[-1] = True
     order = np.flatnonzero(keep)
     return points[np.concatenate([[j], order[order != j]])]
 

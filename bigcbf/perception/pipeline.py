@@ -43,7 +43,7 @@ import numpy as np
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (cluster_points, extent, measure_compact, scan_to_points, select_wall_points,
+from .geometry import (cluster_points, concavity, extent, measure_compact, scan_to_points, select_wall_points,
                        wall_candidates, wall_point_covariance)
 from .tracker import Tracker
 
@@ -105,24 +105,31 @@ class Perception:
         robot = np.array([float(pose[0]), float(pose[1])])
 
         sp = scan_to_points(scan, pose, pr)
-        centers, radii, walls, compact = [], [], [], []
+        centers, radii, covs, rounds, walls, compact = [], [], [], [], [], []
         for cl in cluster_points(sp, pr):
             pts = sp.xy[cl.idx]
             if len(cl.idx) < pr.min_points or extent(pts, pr.compact_max_extent_m) > pr.compact_max_extent_m:
                 walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
                 continue
             meas = measure_compact(pts, sp.sensor, pr, cl.occluded, sp.angle_increment)
-            if not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)):
+            if ((not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)))
+                    or meas.rms > pr.fit_rms_ratio_max * meas.rms_expected
+                    or concavity(pts, sp.sensor) > pr.concavity_ratio_max * meas.rms_expected):
                 walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
                 continue
             centers.append(meas.center)
             radii.append(meas.radius)
+            covs.append(meas.cov)
+            rounds.append(meas.round)
             compact.append(pts)
-        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot)
+        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot,
+                                     np.array(covs).reshape(-1, 2, 2), np.array(rounds, bool), compact)
         walls += [wall_candidates(compact[k], robot, pr.wall_spacing_m) for k in rejected]
+        circles, surfaces = self.tracker.report(robot)
+        walls += [wall_candidates(q, robot, pr.wall_spacing_m) for q in surfaces]
         wall_pts = select_wall_points(np.concatenate(walls) if walls else np.zeros((0, 2)), robot, pr)
         self.last_wall_points = wall_pts
         wall_cov = wall_point_covariance(wall_pts, sp.sensor, sp.angle_increment, pr)
-        out = self.tracker.obstacles(robot).concat(wall_obstacles(wall_pts, wall_cov))
+        out = circles.concat(wall_obstacles(wall_pts, wall_cov))
         self._last_ms = 1e3 * (time.perf_counter() - t0)
         return out

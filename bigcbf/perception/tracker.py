@@ -41,7 +41,7 @@ from .kalman import kf_predict, kf_update, mahalanobis2
 _INFEASIBLE = 1e9
 
 _FIELDS = ("x", "P", "xs", "Ps", "ids", "r", "hits", "misses", "confirmed", "static", "n_dyn", "n_stat", "last_hit",
-           "P_hit", "sv_hit")
+           "P_hit", "sv_hit", "roundness", "surface")
 
 
 def coast_bound(tau, static, speed, sigma_v0, params: PerceptionParams) -> np.ndarray:
@@ -96,6 +96,8 @@ class Tracker:
         self.n_dyn = np.zeros(0, int)
         self.n_stat = np.zeros(0, int)
         self.last_hit = np.zeros(0)
+        self.roundness = np.zeros(0)          # smoothed share of circle-model measurements (1 = round)
+        self.surface = np.empty(0, object)    # the points (k, 2) of the last measured cluster, odom [m]
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -104,19 +106,20 @@ class Tracker:
         for name in _FIELDS:
             setattr(self, name, getattr(self, name)[mask])
 
-    def _append(self, z: np.ndarray, r: np.ndarray, t: float) -> None:
+    def _append(self, z: np.ndarray, r: np.ndarray, R: np.ndarray, round_: np.ndarray, surface: np.ndarray,
+                t: float) -> None:
         m = len(z)
         pr = self.params
         x = np.hstack([z, np.zeros((m, 2))])
         P = np.zeros((m, 4, 4))
-        P[:, 0, 0] = P[:, 1, 1] = pr.meas_sigma_m ** 2
+        P[:, :2, :2] = R
         P[:, 2, 2] = P[:, 3, 3] = pr.init_vel_sigma_mps ** 2
-        R = pr.meas_sigma_m ** 2 * np.broadcast_to(np.eye(2), (m, 2, 2))
         new = dict(x=x, P=P, xs=np.asarray(z, float).reshape(m, 2).copy(), Ps=R.copy(), P_hit=R.copy(),
                    sv_hit=np.full(m, pr.init_vel_sigma_mps), ids=self.next_id + np.arange(m), r=np.asarray(r, float),
                    hits=np.ones(m, int),
                    misses=np.zeros(m, int), confirmed=np.full(m, pr.confirm_hits <= 1), static=np.ones(m, bool),
-                   n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t))
+                   n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t),
+                   roundness=np.asarray(round_, float), surface=surface)
         self.next_id += m
         for name in _FIELDS:
             setattr(self, name, np.concatenate([getattr(self, name), new[name]]))
@@ -128,40 +131,94 @@ class Tracker:
             self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)
         self.t = t
 
-    def associate(self, z: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,), gated
-        (module docstring)."""
+    def measurement_covariance(self, cov: np.ndarray | None, m: int) -> np.ndarray:
+        """R (m, 2, 2) [m^2] of m cluster centres: their fit covariance ``cov`` (``geometry.measure_compact``; none
+        given: 0) plus fit_model_sigma_m^2 I (what the fit's own covariance leaves out: the object's shape is not
+        exactly the model's, the scan is not instantaneous)."""
+        floor = self.params.fit_model_sigma_m ** 2 * np.eye(2)
+        if cov is None:
+            return np.broadcast_to(floor, (m, 2, 2)).copy()
+        return np.asarray(cov, float).reshape(m, 2, 2) + floor
+
+    def merged(self, z: np.ndarray, radii: np.ndarray, surface: np.ndarray) -> np.ndarray:
+        """(M,) bool: which clusters hold two known objects: the points of the cluster lie on the surfaces of two or
+        more confirmed tracks (at least two points each within merge_tol_m plus twice the track's position std of
+        its predicted circle). A pedestrian passing a post, two pedestrians side by side: their cluster's circle
+        sits between them and would drag both tracks, so it updates neither (they coast) and the pipeline turns
+        its points into wall points. Call after :meth:`predict`."""
+        m = len(z)
+        out = np.zeros(m, bool)
+        conf = np.flatnonzero(self.confirmed)
+        if len(conf) < 2 or m == 0:
+            return out
+        pr = self.params
+        c, r = self.x[conf, :2], self.r[conf]
+        lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
+        tol = pr.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
+        near = np.linalg.norm(z[:, None, :] - c[None, :, :], axis=2) < (radii[:, None] + r[None, :] + 0.3)
+        for k in np.flatnonzero(near.sum(axis=1) >= 2):
+            pts = surface[k]
+            if len(pts) < 4:
+                continue
+            j = np.flatnonzero(near[k])
+            d = np.abs(np.linalg.norm(pts[:, None, :] - c[None, j, :], axis=2) - r[None, j])
+            out[k] = int(np.sum(np.sum(d <= tol[None, j], axis=0) >= 2)) >= 2
+        return out
+
+    def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None,
+                  usable: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,) and
+        measurement covariances R (M,2,2) (default: ``measurement_covariance(None, M)``), gated (module
+        docstring); measurements with ``usable`` False take part in none."""
         n, m = len(self), len(z)
         if n == 0 or m == 0:
             return np.zeros(0, int), np.zeros(0, int)
         pr = self.params
+        if R is None:
+            R = self.measurement_covariance(None, m)
         y = z[None, :, :] - self.x[:, None, :2]                              # (n, m, 2)
         dist = np.linalg.norm(y, axis=2)
-        S = self.P[:, None, :2, :2] + pr.meas_sigma_m ** 2 * np.eye(2)
+        S = self.P[:, None, :2, :2] + R[None, :, :, :]
         d2 = mahalanobis2(y, S)
         ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
         ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
+        if usable is not None:
+            ok &= np.asarray(usable, bool)[None, :]
         cost = np.where(ok, dist, _INFEASIBLE)
         rows, cols = linear_sum_assignment(cost)
         good = ok[rows, cols]
         return rows[good], cols[good]
 
-    def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray) -> np.ndarray:
+    def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray, cov: np.ndarray | None = None,
+             round_: np.ndarray | None = None, surface: list | None = None) -> np.ndarray:
         """One scan: predict to t, associate cluster centres z (M,2) with radii (M,), update, birth, delete.
 
-        Returns the indices of the measurements that neither updated a track nor started one (a cluster inside a
-        known object's circle whose radius does not match it, e.g. two objects merged into one cluster)."""
+        ``cov`` (M,2,2): the centres' fit covariances (``measurement_covariance``); ``round_`` (M,) bool: whether
+        the circle model explained the cluster (default all); ``surface``: the cluster's points (k, 2) per
+        measurement, kept with the track that takes it (``report``). Returns the indices of the measurements that
+        neither updated a track nor started one (a cluster inside a known object's circle whose radius does not
+        match it, e.g. two objects merged into one cluster)."""
         pr = self.params
         z = np.asarray(z, float).reshape(-1, 2)
+        m = len(z)
         radii = np.asarray(radii, float).reshape(-1)
+        R = self.measurement_covariance(cov, m)
+        rnd = np.ones(m) if round_ is None else np.asarray(round_, float).reshape(m)
+        surf = np.empty(m, object)
+        for k in range(m):
+            surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
         self.predict(t)
-        rows, cols = self.associate(z, radii)
+        merged = self.merged(z, radii, surf)
+        rows, cols = self.associate(z, radii, R, usable=~merged)
         if len(rows):
-            x, P = kf_update(self.x[rows], self.P[rows], z[cols], pr.meas_sigma_m ** 2)
+            x, P = kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
             self.x[rows], self.P[rows] = x, P
-            self._update_static_filter(rows, z[cols])
+            self._update_static_filter(rows, z[cols], R[cols])
             a = pr.radius_smoothing
             self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
+            b = pr.shape_smoothing
+            self.roundness[rows] = (1 - b) * self.roundness[rows] + b * rnd[cols]
+            self.surface[rows] = surf[cols]
             self.hits[rows] += 1
             self.misses[rows] = 0
             self.last_hit[rows] = t
@@ -185,25 +242,25 @@ class Tracker:
                          self.misses <= pr.tentative_max_misses)
         self._keep(alive)
         # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
-        free = np.ones(len(z), bool)
+        free = ~merged
         free[cols] = False
-        rejected = np.zeros(len(z), bool)
+        rejected = merged.copy()
         if free.any() and len(self):
             d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
-            rejected = free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
+            rejected |= free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
             free &= ~rejected
         if free.any():
-            self._append(z[free], radii[free], t)
+            self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
         if len(self) > pr.max_candidates:
             keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
             self._keep(np.sort(keep))
         return np.flatnonzero(rejected)
 
-    def _update_static_filter(self, rows: np.ndarray, z: np.ndarray) -> None:
-        """The constant-position filter's update with measurements z (module docstring), then its consistency check
-        against the CV filter (restart from it when they disagree beyond gate_chi2)."""
+    def _update_static_filter(self, rows: np.ndarray, z: np.ndarray, R: np.ndarray) -> None:
+        """The constant-position filter's update with measurements z (K,2) of covariances R (K,2,2) (module
+        docstring), then its consistency check against the CV filter (restart from it when they disagree beyond
+        gate_chi2)."""
         pr = self.params
-        R = pr.meas_sigma_m ** 2 * np.eye(2)
         Ps = self.Ps[rows]
         K = Ps @ np.linalg.inv(Ps + R)
         xs = self.xs[rows] + np.einsum("nij,nj->ni", K, z - self.xs[rows])
@@ -234,14 +291,43 @@ class Tracker:
     def surface_distance(self, robot_xy: np.ndarray) -> np.ndarray:
         return np.linalg.norm(self.x[:, :2] - robot_xy, axis=1) - self.r
 
-    def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
-        """The confirmed tracks, at most max_tracks, nearest first (surface distance). Static tracks have v = 0 and
-        the constant-position filter's position and covariance; coasting covariances are bounded (``reported``)."""
-        idx = np.flatnonzero(self.confirmed)
-        if len(idx) == 0:
-            return Obstacles.empty()
-        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")][: self.params.max_tracks]
+    def is_round(self) -> np.ndarray:
+        """Whether each track's object is round: most of its recent clusters were explained by the circle model
+        (smoothed share of circle-model measurements, factor shape_smoothing, at least 1/2)."""
+        return self.roundness >= 0.5
+
+    def report(self, robot_xy: np.ndarray) -> tuple[Obstacles, list]:
+        """What the tracks tell the stack: (circles, surfaces).
+
+        Circles: the confirmed tracks that are dynamic or round, at most max_tracks, nearest first (surface
+        distance). Static tracks have v = 0 and the constant-position filter's position and covariance; coasting
+        covariances are bounded (``reported``).
+
+        Surfaces: the points (k, 2) of the last measured cluster of every other track, which the pipeline turns
+        into wall points: a static object that is not round (a box, a wall end, a corner: its circle would cover
+        free space around it) and the confirmed tracks beyond the budget (those measured now when dynamic, since a
+        walker's old points are stale), and the tentative tracks measured now (an object seen for the first time
+        is an obstacle before its track is confirmed)."""
+        pr = self.params
+        measured = self.last_hit >= (self.t if self.t is not None else 0.0) - 1e-9
+        circle = self.confirmed & (~self.static | self.is_round())
+        idx = np.flatnonzero(circle)
+        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")]
+        order, beyond = order[: pr.max_tracks], order[pr.max_tracks:]
+        as_points = np.zeros(len(self), bool)
+        as_points[beyond] = True
+        as_points |= self.confirmed & ~circle
+        as_points &= self.static | measured
+        as_points |= ~self.confirmed & measured
+        surfaces = [self.surface[k] for k in np.flatnonzero(as_points) if len(self.surface[k])]
+        if len(order) == 0:
+            return Obstacles.empty(), surfaces
         v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
         p, cov = self.reported(order)
-        return Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy())
+        return (Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy()),
+                surfaces)
+
+    def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
+        """The circles of :meth:`report`."""
+        return self.report(robot_xy)[0]
 

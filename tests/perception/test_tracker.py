@@ -96,11 +96,13 @@ def test_cap_covariance_by_hand():
 
 def test_static_track_covariance_is_the_constant_position_filters():
     """A post measured at 10 Hz: the reported covariance converges to the constant-position filter's steady state,
-    P = (-a + sqrt(a^2 + 4 a R)) / 2 with a = q dt = 1e-4 m^2, R = 0.05^2 (P^2 + a P - a R = 0): 4.525e-4 m^2."""
+    P = (-a + sqrt(a^2 + 4 a R)) / 2 with a = q dt = 1e-4 m^2, R = 0.05^2 (P^2 + a P - a R = 0): 4.525e-4 m^2.
+    R is the fit covariance handed to step() plus fit_model_sigma_m^2."""
     tr = _tracker(confirm_hits=1)
     rng = np.random.default_rng(0)
+    cov = (0.05 ** 2 - PerceptionParams().fit_model_sigma_m ** 2) * np.eye(2)[None]
     for k in range(60):
-        tr.step(0.1 * k, np.array([[2.0, 1.0]]) + rng.normal(0, 0.05, (1, 2)), np.array([0.2]), ORIGIN)
+        tr.step(0.1 * k, np.array([[2.0, 1.0]]) + rng.normal(0, 0.05, (1, 2)), np.array([0.2]), ORIGIN, cov)
     obs = tr.obstacles(ORIGIN)
     a, R = 1e-3 * 0.1, 0.05 ** 2
     steady = (-a + np.sqrt(a * a + 4 * a * R)) / 2
@@ -149,17 +151,31 @@ def test_static_track_that_starts_moving_follows_it():
 
 
 def test_young_track_is_not_classified_on_its_first_noisy_centres():
-    """A static bin whose first fitted centre is 11 cm off (few beams, range noise): the velocity of its first
-    updates is that jump, not motion; with classify_after_hits = 3 the classification waits until the velocity
-    rests on more than 3 measurements (from the second measurement on, it is classified dynamic at its fourth)."""
-    old = _tracker(confirm_hits=3, classify_after_hits=1)
-    for k, z in enumerate(([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])):
+    """A static bin 4.5 m away whose first fitted centres jump 11 cm (few beams, range noise): with the fit's own
+    covariance (about 8 cm std along the line of sight for four beams there; ``geometry.circle_fit_covariance``)
+    and a speed that must exceed dynamic_sigma = 2 standard deviations, the jump is not evidence of motion. With
+    the former fixed 5 cm measurement std and a 1-sigma test it was classified dynamic at its fourth update."""
+    zs = ([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])
+    ray = np.array([4.45, -0.93]) / np.linalg.norm([4.45, -0.93])
+    cov = 0.08 ** 2 * np.outer(ray, ray) + 0.01 ** 2 * np.eye(2)
+    old = _tracker(confirm_hits=3, classify_after_hits=1, dynamic_sigma=1.0, fit_model_sigma_m=0.05)
+    for k, z in enumerate(zs):
         old.step(0.1 * k, np.array([z]), np.array([0.15]), ORIGIN)
     assert not old.static[0]
-    tr = _tracker(confirm_hits=3, classify_after_hits=3)
+    tr = _tracker(confirm_hits=3)
     rng = np.random.default_rng(1)
-    tr.step(0.0, np.array([[4.36, -0.905]]), np.array([0.15]), ORIGIN)
-    tr.step(0.1, np.array([[4.47, -0.945]]), np.array([0.15]), ORIGIN)
-    for k in range(2, 20):
-        tr.step(0.1 * k, np.array([[4.53, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
+    for k in range(20):
+        z = np.array([zs[min(k, 3)]]) + (rng.normal(0, 0.01, (1, 2)) if k >= 4 else 0.0)
+        tr.step(0.1 * k, z, np.array([0.15]), ORIGIN, cov[None])
         assert tr.static[0], f"classified dynamic at update {k + 1}"
+
+
+def test_walker_near_the_robot_is_classified_within_three_updates():
+    """The other side of the significance test: a walker 1.5 m away at 1 m/s, measured well (2 cm std), is
+    dynamic at its fourth measurement (the earliest n_dynamic = 3 allows) and reported with its velocity."""
+    tr = _tracker(confirm_hits=3)
+    cov = np.array([0.02 ** 2 * np.eye(2)])
+    for k in range(4):
+        tr.step(0.1 * k, np.array([[1.5, -1.0 + 0.1 * k]]), np.array([0.25]), ORIGIN, cov)
+    obs = tr.obstacles(ORIGIN)
+    assert not obs.static[0] and np.linalg.norm(obs.v[0] - [0.0, 1.0]) < 0.35
