@@ -371,6 +371,143 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
                        float(rms_rect), sigma)
 
 
+def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -> tuple[list, np.ndarray]:
+    """:func:`measure_compact` and :func:`concavity` (k = 2) of many compact clusters at once: the algebraic circle
+    fits, residuals, arc spans, covariances and dents of all clusters in a few array operations over their
+    concatenated points (np.*.reduceat), the fixed-radius refits and rectangle fits in a loop over the clusters
+    that need them. Same results as calling the two per cluster (to rounding: sums run in another order); the
+    per-cluster functions stay the reference (``tests/perception/test_geometry.py``).
+
+    ``clusters``: Cluster objects of at least 3 points. Returns (measurements, dents [m])."""
+    m = len(clusters)
+    if m == 0:
+        return [], np.zeros(0)
+    pr = params
+    n = np.array([len(c.idx) for c in clusters])
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    idx = np.concatenate([c.idx for c in clusters])
+    g = np.repeat(np.arange(m), n)
+    P = sp.xy[idx]
+    px, py = P[:, 0], P[:, 1]
+    sensor = sp.sensor
+    dx, dy = px - sensor[0], py - sensor[1]
+    dist = np.sqrt(dx * dx + dy * dy)
+    # nearest point of each cluster (the first one at the minimum, as np.argmin)
+    dmin = np.minimum.reduceat(dist, starts)
+    cand = np.where(dist == dmin[g], np.arange(len(idx)), len(idx))
+    k_near = np.minimum.reduceat(cand, starts)
+    near = P[k_near]
+    ray = (near - sensor) / np.maximum(dmin, 1e-9)[:, None]
+    sigma = pr.range_sigma_m + pr.range_sigma_frac * np.add.reduceat(dist, starts) / n
+    # algebraic (Kasa) circle fits, as fit_circle
+    mean = np.add.reduceat(P, starts) / n[:, None]
+    u, v = px - mean[g, 0], py - mean[g, 1]
+    uu, vv, uv = u * u, v * v, u * v
+    suu, svv, suv = np.add.reduceat(uu, starts), np.add.reduceat(vv, starts), np.add.reduceat(uv, starts)
+    w = uu + vv
+    b1, b2 = 0.5 * np.add.reduceat(u * w, starts), 0.5 * np.add.reduceat(v * w, starts)
+    det = suu * svv - suv * suv
+    good = (n >= 3) & (det > 1e-10 * (suu + svv) ** 2)
+    sdet = np.where(good, det, 1.0)
+    uc = np.where(good, (svv * b1 - suv * b2) / sdet, 0.0)
+    vc = np.where(good, (suu * b2 - suv * b1) / sdet, 0.0)
+    r = np.where(good, np.sqrt(uc * uc + vc * vc + (suu + svv) / n), np.inf)
+    c = mean + np.stack([uc, vc], axis=1)
+    res = np.sqrt((u - uc[g]) ** 2 + (v - vc[g]) ** 2) - np.where(good, r, 0.0)[g]
+    rms = np.where(good, np.sqrt(np.add.reduceat(res * res, starts) / n), np.inf)
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
+    tol = np.where(fitted, sigma, 0.0)
+    for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
+        rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
+        pts = P[starts[j]: starts[j] + n[j]]
+        cj, rmsj = fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
+        c[j], r[j], rms[j] = cj, rj, rmsj
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    # arc span seen from the centre, as measure_compact
+    u2x, u2y = px - c[g, 0], py - c[g, 1]
+    midx, midy = np.add.reduceat(u2x, starts) / n, np.add.reduceat(u2y, starts) / n
+    ang = np.arctan2(u2x * midy[g] - u2y * midx[g], u2x * midx[g] + u2y * midy[g])
+    span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
+    dc = np.linalg.norm(c - sensor, axis=1)
+    rr = np.where(np.isfinite(r), r, 1.0)
+    sampled = np.minimum(np.arccos(np.minimum(rr / np.maximum(dc, 1e-12), 1.0)),
+                         np.arcsin(np.clip((rr - dc * sp.angle_increment) / rr, 0.0, 1.0)))
+    occluded = np.array([cl.occluded for cl in clusters])
+    need = np.where(occluded, pr.fit_min_arc_rad,
+                    np.maximum(pr.fit_min_arc_rad, pr.fit_span_ratio * 2 * sampled))
+    # point weights for the circle covariances (point_variances with the outward normals)
+    d2 = np.maximum(np.sqrt(u2x * u2x + u2y * u2y), 1e-12)
+    nx, ny = u2x / d2, u2y / d2
+    cos = (dx * nx + dy * ny) / np.maximum(dist, 1e-12)
+    cos2 = np.minimum(cos * cos, 1.0)
+    sr = pr.range_sigma_m + pr.range_sigma_frac * dist
+    wt = 1.0 / np.maximum(sr * sr * cos2 + (dist * sp.angle_increment) ** 2 / 12.0 * (1.0 - cos2), 1e-12)
+    a11, a12, a22 = (np.add.reduceat(wt * nx * nx, starts), np.add.reduceat(wt * nx * ny, starts),
+                     np.add.reduceat(wt * ny * ny, starts))
+    a13, a23, a33 = np.add.reduceat(wt * nx, starts), np.add.reduceat(wt * ny, starts), np.add.reduceat(wt, starts)
+    # dents (concavity, k = 2): the point two ahead against the chord from two before to two after
+    dents = np.zeros(m)
+    N = len(idx)
+    if N > 4:
+        ia = np.arange(N - 4)
+        same = g[ia] == g[ia + 4]
+        if same.any():
+            ia = ia[same]
+            a_, b_, c_ = P[ia], P[ia + 2], P[ia + 4]
+            ex, ey = c_[:, 0] - a_[:, 0], c_[:, 1] - a_[:, 1]
+            length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
+            side_b = ex * (b_[:, 1] - a_[:, 1]) - ey * (b_[:, 0] - a_[:, 0])
+            side_s = ex * (sensor[1] - a_[:, 1]) - ey * (sensor[0] - a_[:, 0])
+            np.maximum.at(dents, g[ia], -np.sign(side_s) * side_b / length)
+    out = []
+    for j in range(m):
+        pts = P[starts[j]: starts[j] + n[j]]
+        if tol[j] > 0 and rms[j] <= tol[j]:
+            rect, rms_rect = None, np.inf
+        else:
+            rect = fit_rectangle(pts, sensor, full=True)
+            rms_rect = rect[2]
+        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
+            cov = _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
+                                        c[j], sensor, pr)
+            out.append(Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
+                                   bool(rms[j] <= rms_rect)))
+            continue
+        if rect is None:
+            rect = fit_rectangle(pts, sensor, full=True)
+        rc, rrad, rms_rect, axes, lengths = rect
+        cov = rectangle_covariance(pts, axes, lengths, sensor, sp.angle_increment, pr)
+        out.append(Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
+                               float(rms_rect), float(sigma[j])))
+    return out, dents
+
+
+def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
+    """circle_fit_covariance from the entries of J^T W J (closed-form inverses)."""
+    cap = params.radius_max_m ** 2
+    if fit_radius:
+        # centre block of the inverse of [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]]: cofactors / det
+        c11 = a22 * a33 - a23 * a23
+        c12 = -(a12 * a33 - a23 * a13)
+        c22 = a11 * a33 - a13 * a13
+        det = a11 * c11 + a12 * c12 + a13 * (a12 * a23 - a22 * a13)
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[c11, c12], [c12, c22]]) / det
+    else:
+        det = a11 * a22 - a12 * a12
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[a22, -a12], [-a12, a11]]) / det
+        ray = center - sensor
+        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    if not np.all(np.isfinite(C)):
+        return cap * np.eye(2)
+    return _cap_std(C, params.radius_max_m)
+
+
 def concavity(points: np.ndarray, sensor: np.ndarray, k: int = 2) -> float:
     """How far [m] the cluster's outline (points in scan order) dents away from the sensor: the largest distance of
     a point p_i behind the chord from p_(i-k) to p_(i+k), counted positive away from the sensor (0 when no point
@@ -410,6 +547,65 @@ def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) ->
     keep[0] = keep[-1] = True
     order = np.flatnonzero(keep)
     return points[np.concatenate([[j], order[order != j]])]
+
+
+def wall_candidates_many(point_sets: list, robot_xy: np.ndarray, spacing: float) -> np.ndarray:
+    """:func:`wall_candidates` of many clusters at once (array operations over their concatenated points),
+    concatenated in the same order: cluster by cluster, each one's nearest point first."""
+    sets = [q for q in point_sets if len(q)]
+    if not sets:
+        return np.zeros((0, 2))
+    n = np.array([len(q) for q in sets])
+    m = len(sets)
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    ends = starts + n - 1
+    Q = np.concatenate(sets)
+    N = len(Q)
+    g = np.repeat(np.arange(m), n)
+    dx, dy = Q[:, 0] - robot_xy[0], Q[:, 1] - robot_xy[1]
+    d2 = dx * dx + dy * dy
+    dmin = np.minimum.reduceat(d2, starts)
+    ar = np.arange(N)
+    j = np.minimum.reduceat(np.where(d2 == dmin[g], ar, N), starts)          # first nearest point per cluster
+    step = np.zeros(N)
+    if N > 1:
+        e = np.diff(Q, axis=0)
+        step[1:] = np.sqrt(e[:, 0] ** 2 + e[:, 1] ** 2)
+    step[starts] = 0.0
+    cs = np.cumsum(step)
+    s_ = cs - cs[starts][g]
+    bins = np.floor(np.abs(s_ - s_[j][g]) / spacing)
+    jg = j[g]
+    keep = np.zeros(N, bool)
+    fwd = (ar > jg)
+    keep[fwd] = bins[fwd] != bins[ar[fwd] - 1]
+    bwd = (ar < jg)
+    keep[bwd] = bins[bwd] != bins[ar[bwd] + 1]
+    keep[j] = keep[starts] = keep[ends] = True
+    sel = np.flatnonzero(keep)
+    order = np.lexsort((sel, sel != jg[sel], g[sel]))
+    return Q[sel[order]]
+
+
+def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np.ndarray:
+    """(len(clusters),) bool: which clusters are compact objects: at least min_points points and an extent (largest
+    distance between two of their points, :func:`extent`) of at most compact_max_extent_m. The extent is bounded
+    by the largest distance d1 from the cluster's first point (d1 <= extent <= 2 d1), so only clusters with
+    limit / 2 < d1 <= limit need the pairwise distances."""
+    m = len(clusters)
+    if m == 0:
+        return np.zeros(0, bool)
+    limit = params.compact_max_extent_m
+    n = np.array([len(c.idx) for c in clusters])
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    P = sp.xy[np.concatenate([c.idx for c in clusters])]
+    first = P[starts][np.repeat(np.arange(m), n)]
+    d = np.sqrt((P[:, 0] - first[:, 0]) ** 2 + (P[:, 1] - first[:, 1]) ** 2)
+    e1 = np.maximum.reduceat(d, starts)
+    ok = (n >= params.min_points) & (e1 <= limit)
+    for k in np.flatnonzero(ok & (e1 > limit / 2) & (n <= 400)):
+        ok[k] = extent(P[starts[k]: starts[k] + n[k]], limit) <= limit
+    return ok
 
 
 def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: PerceptionParams) -> np.ndarray:

@@ -43,8 +43,8 @@ import numpy as np
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (cluster_points, concavity, extent, measure_compact, scan_to_points, select_wall_points,
-                       wall_candidates, wall_point_covariance)
+from .geometry import (cluster_points, compact_mask, measure_clusters, scan_to_points, select_wall_points,
+                       wall_candidates_many, wall_point_covariance)
 from .tracker import Tracker
 
 
@@ -105,17 +105,18 @@ class Perception:
         robot = np.array([float(pose[0]), float(pose[1])])
 
         sp = scan_to_points(scan, pose, pr)
-        centers, radii, covs, rounds, walls, compact = [], [], [], [], [], []
-        for cl in cluster_points(sp, pr):
+        clusters = cluster_points(sp, pr)
+        is_compact = compact_mask(sp, clusters, pr)
+        walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
+        candidates = [cl for cl, c in zip(clusters, is_compact) if c]
+        centers, radii, covs, rounds, compact = [], [], [], [], []
+        measurements, dents = measure_clusters(sp, candidates, pr)
+        for cl, meas, dent in zip(candidates, measurements, dents):
             pts = sp.xy[cl.idx]
-            if len(cl.idx) < pr.min_points or extent(pts, pr.compact_max_extent_m) > pr.compact_max_extent_m:
-                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
-                continue
-            meas = measure_compact(pts, sp.sensor, pr, cl.occluded, sp.angle_increment)
             if ((not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)))
                     or meas.rms > pr.fit_rms_ratio_max * meas.rms_expected
-                    or concavity(pts, sp.sensor) > pr.concavity_ratio_max * meas.rms_expected):
-                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
+                    or dent > pr.concavity_ratio_max * meas.rms_expected):
+                walls.append(pts)
                 continue
             centers.append(meas.center)
             radii.append(meas.radius)
@@ -124,10 +125,10 @@ class Perception:
             compact.append(pts)
         rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot,
                                      np.array(covs).reshape(-1, 2, 2), np.array(rounds, bool), compact)
-        walls += [wall_candidates(compact[k], robot, pr.wall_spacing_m) for k in rejected]
+        walls += [compact[k] for k in rejected]
         circles, surfaces = self.tracker.report(robot)
-        walls += [wall_candidates(q, robot, pr.wall_spacing_m) for q in surfaces]
-        wall_pts = select_wall_points(np.concatenate(walls) if walls else np.zeros((0, 2)), robot, pr)
+        walls += surfaces
+        wall_pts = select_wall_points(wall_candidates_many(walls, robot, pr.wall_spacing_m), robot, pr)
         self.last_wall_points = wall_pts
         wall_cov = wall_point_covariance(wall_pts, sp.sensor, sp.angle_increment, pr)
         out = circles.concat(wall_obstacles(wall_pts, wall_cov))

@@ -284,3 +284,39 @@ def test_one_object_versus_two_in_a_cluster():
             bad = (m.rms > PR.fit_rms_ratio_max * m.rms_expected
                    or concavity(pts, sp.sensor) > PR.concavity_ratio_max * m.rms_expected)
             assert bad == (name == "two posts"), name
+
+
+def test_batched_functions_equal_the_per_cluster_reference():
+    """measure_clusters, wall_candidates_many and compact_mask (array operations over all clusters of a scan, what
+    the pipeline runs) give what measure_compact, concavity, wall_candidates and extent give cluster by cluster."""
+    from bigcbf.perception.geometry import (compact_mask, concavity, measure_clusters, wall_candidates_many)
+    rng = np.random.default_rng(5)
+    for trial in range(12):
+        circles = [(rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(0.05, 0.4)) for _ in range(10)]
+        segs = []
+        for _ in range(4):
+            segs += box_segments(rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(0.1, 0.5), rng.uniform(0.1, 0.5),
+                                 rng.uniform(0, np.pi))
+        segs += [(-6.0, -6.0, 6.0, -6.0), (-6.0, 6.0, 6.0, 6.0)]
+        pose = (rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-np.pi, np.pi))
+        scan = ray_scan(pose, circles, segs, noise=0.01, rng=rng)
+        sp = scan_to_points(scan, pose, PR)
+        clusters = cluster_points(sp, PR)
+        mask = compact_mask(sp, clusters, PR)
+        ref = np.array([len(c.idx) >= PR.min_points and extent(sp.xy[c.idx], PR.compact_max_extent_m)
+                        <= PR.compact_max_extent_m for c in clusters])
+        assert np.array_equal(mask, ref)
+        compact = [c for c, k in zip(clusters, mask) if k]
+        ms, dents = measure_clusters(sp, compact, PR)
+        for cl, m, dent in zip(compact, ms, dents):
+            pts = sp.xy[cl.idx]
+            r = measure_compact(pts, sp.sensor, PR, cl.occluded, sp.angle_increment)
+            assert m.arc_fit == r.arc_fit and m.round == r.round
+            np.testing.assert_allclose(m.center, r.center, atol=1e-9)
+            np.testing.assert_allclose(m.cov, r.cov, rtol=1e-6, atol=1e-12)
+            assert m.radius == pytest.approx(r.radius, abs=1e-9) and m.rms == pytest.approx(r.rms, abs=1e-9)
+            assert dent == pytest.approx(concavity(pts, sp.sensor), abs=1e-9)
+        sets = [sp.xy[c.idx] for c in clusters]
+        robot = np.array(pose[:2])
+        np.testing.assert_allclose(wall_candidates_many(sets, robot, 0.2),
+                                   np.concatenate([wall_candidates(q, robot, 0.2) for q in sets]), atol=1e-12)
