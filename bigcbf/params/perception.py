@@ -78,9 +78,9 @@ class PerceptionParams:
     gate_max_m: float = 1.0
     #: ...and only when the cluster's radius is within gate_radius_m of the track's.
     gate_radius_m: float = 0.15
-    #: A cluster whose points lie on the predicted surfaces of two or more confirmed tracks (two points each within
-    #: merge_tol_m plus twice the track's position std) holds those objects merged: it updates none of them
-    #: (``tracker.Tracker.merged``) and becomes wall points.
+    #: Track-aided segmentation (``pipeline.Perception._segment``): a scan point lies on a confirmed track's object
+    #: when it is within merge_tol_m plus twice the track's position std of its predicted circle
+    #: (``tracker.Tracker.surface_owner``); a cluster holding two known objects is split along them.
     merge_tol_m: float = 0.05
     #: At most max_tracks confirmed tracks are returned (nearest first); up to max_candidates are maintained.
     max_tracks: int = 8

@@ -43,8 +43,8 @@ import numpy as np
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (cluster_points, compact_mask, measure_clusters, scan_to_points, select_wall_points,
-                       wall_candidates_many, wall_point_covariance)
+from .geometry import (Cluster, cluster_points, compact_mask, extent, measure_clusters, scan_to_points,
+                       select_wall_points, wall_candidates_many, wall_point_covariance)
 from .tracker import Tracker
 
 
@@ -88,6 +88,41 @@ class Perception:
         spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])        # (upper) median
         return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
 
+    def _segment(self, sp, clusters: list) -> list:
+        """Track-aided segmentation: a cluster that holds known objects (points on the predicted circles of
+        confirmed tracks, ``Tracker.surface_owner``) is split along them: a compact cluster on two or more tracks'
+        surfaces (a walker beside a post or another walker), and the walkers (dynamic tracks) in an extended
+        cluster (walkers side by side, a walker along a wall). Each such track's points become a cluster of their
+        own (marked partly hidden: its arc is cut where the other object begins) if at least min_points; the rest
+        stays one cluster. Other clusters are unchanged."""
+        pr = self.params
+        T = self.tracker
+        if not np.any(T.confirmed):
+            return clusters
+        owner = T.surface_owner(sp.xy)
+        out = []
+        for cl in clusters:
+            own = owner[cl.idx]
+            if not np.any(own >= 0):
+                out.append(cl)
+                continue
+            ids, counts = np.unique(own[own >= 0], return_counts=True)
+            ids = ids[counts >= 2]
+            extended = extent(sp.xy[cl.idx], pr.compact_max_extent_m) > pr.compact_max_extent_m
+            split = ids[~T.static[ids]] if extended else (ids if len(ids) >= 2 else ids[:0])
+            split = [i for i in split if np.count_nonzero(own == i) >= pr.min_points]
+            if not split or (len(split) == 1 and np.count_nonzero(own == split[0]) == len(own)):
+                out.append(cl)
+                continue
+            taken = np.zeros(len(own), bool)
+            for i in split:
+                part = own == i
+                taken |= part
+                out.append(Cluster(cl.idx[part], True))
+            if np.any(~taken):
+                out.append(Cluster(cl.idx[~taken], cl.occluded))
+        return out
+
     def update(self, scan: LaserScan, pose: tuple[float, float, float]) -> Obstacles:
         """Process one scan taken at ``scan.stamp`` [s] with the robot at ``pose`` = (x [m], y [m], theta [rad]) in
         odom at that stamp; returns the obstacle estimates in odom (tracks, then wall points)."""
@@ -105,7 +140,8 @@ class Perception:
         robot = np.array([float(pose[0]), float(pose[1])])
 
         sp = scan_to_points(scan, pose, pr)
-        clusters = cluster_points(sp, pr)
+        self.tracker.predict(float(scan.stamp))
+        clusters = self._segment(sp, cluster_points(sp, pr))
         is_compact = compact_mask(sp, clusters, pr)
         walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
         candidates = [cl for cl, c in zip(clusters, is_compact) if c]

@@ -140,36 +140,29 @@ class Tracker:
             return np.broadcast_to(floor, (m, 2, 2)).copy()
         return np.asarray(cov, float).reshape(m, 2, 2) + floor
 
-    def merged(self, z: np.ndarray, radii: np.ndarray, surface: np.ndarray) -> np.ndarray:
-        """(M,) bool: which clusters hold two known objects: the points of the cluster lie on the surfaces of two or
-        more confirmed tracks (at least two points each within merge_tol_m plus twice the track's position std of
-        its predicted circle). A pedestrian passing a post, two pedestrians side by side: their cluster's circle
-        sits between them and would drag both tracks, so it updates neither (they coast) and the pipeline turns
-        its points into wall points. Call after :meth:`predict`."""
-        m = len(z)
-        out = np.zeros(m, bool)
+    def surface_owner(self, points: np.ndarray) -> np.ndarray:
+        """(n,) int: for each point (n, 2), the index (into the track arrays) of the confirmed track on whose
+        predicted circle it lies (|p - c| - r within merge_tol_m plus twice the track's position std; the nearest
+        such circle), or -1. Call after :meth:`predict`: the pipeline splits clusters that hold known objects along
+        this (track-aided segmentation)."""
+        out = np.full(len(points), -1)
         conf = np.flatnonzero(self.confirmed)
-        if len(conf) < 2 or m == 0:
+        if len(conf) == 0 or len(points) == 0:
             return out
-        pr = self.params
         c, r = self.x[conf, :2], self.r[conf]
         lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
-        tol = pr.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
-        near = np.linalg.norm(z[:, None, :] - c[None, :, :], axis=2) < (radii[:, None] + r[None, :] + 0.3)
-        for k in np.flatnonzero(near.sum(axis=1) >= 2):
-            pts = surface[k]
-            if len(pts) < 4:
-                continue
-            j = np.flatnonzero(near[k])
-            d = np.abs(np.linalg.norm(pts[:, None, :] - c[None, j, :], axis=2) - r[None, j])
-            out[k] = int(np.sum(np.sum(d <= tol[None, j], axis=0) >= 2)) >= 2
+        tol = self.params.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
+        d = np.abs(np.sqrt((points[:, None, 0] - c[None, :, 0]) ** 2 + (points[:, None, 1] - c[None, :, 1]) ** 2)
+                   - r[None, :])
+        best = np.argmin(d, axis=1)
+        ok = d[np.arange(len(points)), best] <= tol[best]
+        out[ok] = conf[best[ok]]
         return out
 
-    def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None,
-                  usable: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,) and
         measurement covariances R (M,2,2) (default: ``measurement_covariance(None, M)``), gated (module
-        docstring); measurements with ``usable`` False take part in none."""
+        docstring)."""
         n, m = len(self), len(z)
         if n == 0 or m == 0:
             return np.zeros(0, int), np.zeros(0, int)
@@ -182,8 +175,6 @@ class Tracker:
         d2 = mahalanobis2(y, S)
         ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
         ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
-        if usable is not None:
-            ok &= np.asarray(usable, bool)[None, :]
         cost = np.where(ok, dist, _INFEASIBLE)
         rows, cols = linear_sum_assignment(cost)
         good = ok[rows, cols]
@@ -208,8 +199,7 @@ class Tracker:
         for k in range(m):
             surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
         self.predict(t)
-        merged = self.merged(z, radii, surf)
-        rows, cols = self.associate(z, radii, R, usable=~merged)
+        rows, cols = self.associate(z, radii, R)
         if len(rows):
             x, P = kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
             self.x[rows], self.P[rows] = x, P
@@ -242,9 +232,9 @@ class Tracker:
                          self.misses <= pr.tentative_max_misses)
         self._keep(alive)
         # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
-        free = ~merged
+        free = np.ones(len(z), bool)
         free[cols] = False
-        rejected = merged.copy()
+        rejected = np.zeros(len(z), bool)
         if free.any() and len(self):
             d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
             rejected |= free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
