@@ -43,7 +43,7 @@ import numpy as np
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (Cluster, cluster_points, compact_mask, extent, measure_clusters, scan_to_points,
+from .geometry import (Cluster, cluster_points, compact_mask, measure_clusters, scan_to_points,
                        select_wall_points, wall_candidates_many, wall_point_covariance)
 from .tracker import Tracker
 
@@ -88,40 +88,68 @@ class Perception:
         spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])        # (upper) median
         return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
 
-    def _segment(self, sp, clusters: list) -> list:
+    def _segment(self, sp, clusters: list, is_compact: np.ndarray) -> tuple[list, np.ndarray]:
         """Track-aided segmentation: a cluster that holds known objects (points on the predicted circles of
         confirmed tracks, ``Tracker.surface_owner``) is split along them: a compact cluster on two or more tracks'
         surfaces (a walker beside a post or another walker), and the walkers (dynamic tracks) in an extended
-        cluster (walkers side by side, a walker along a wall). Each such track's points become a cluster of their
-        own (marked partly hidden: its arc is cut where the other object begins) if at least min_points; the rest
-        stays one cluster. Other clusters are unchanged."""
+        cluster (walkers side by side, a walker along a wall). Each such track's points (at least min_points)
+        become a cluster of their own, marked partly hidden (its arc is cut where the other object begins); the
+        rest stays one cluster. Returns the clusters and their compact flags (``geometry.compact_mask``)."""
         pr = self.params
         T = self.tracker
-        if not np.any(T.confirmed):
-            return clusters
+        if len(clusters) == 0 or not np.any(T.confirmed):
+            return clusters, is_compact
         owner = T.surface_owner(sp.xy)
-        out = []
-        for cl in clusters:
-            own = owner[cl.idx]
-            if not np.any(own >= 0):
+        owned = np.flatnonzero(owner >= 0)
+        if len(owned) == 0:
+            return clusters, is_compact
+        # only clusters with points on two tracks, or on a walker while extended, can need a split
+        label = np.empty(len(sp.xy), int)
+        for k, cl in enumerate(clusters):
+            label[cl.idx] = k
+        lo = np.full(len(clusters), np.iinfo(int).max)
+        hi = np.full(len(clusters), -1)
+        np.minimum.at(lo, label[owned], owner[owned])
+        np.maximum.at(hi, label[owned], owner[owned])
+        walker = np.zeros(len(clusters), bool)
+        dyn = owned[~T.static[owner[owned]]]
+        walker[label[dyn]] = True
+        check = np.flatnonzero((hi >= 0) & ((lo != hi) | (walker & ~is_compact)))
+        if len(check) == 0:
+            return clusters, is_compact
+        out, flags, new = [], [], []
+        split_set = set(check.tolist())
+        for k, cl in enumerate(clusters):
+            if k not in split_set:
                 out.append(cl)
+                flags.append(bool(is_compact[k]))
                 continue
+            own = owner[cl.idx]
             ids, counts = np.unique(own[own >= 0], return_counts=True)
-            ids = ids[counts >= 2]
-            extended = extent(sp.xy[cl.idx], pr.compact_max_extent_m) > pr.compact_max_extent_m
-            split = ids[~T.static[ids]] if extended else (ids if len(ids) >= 2 else ids[:0])
-            split = [i for i in split if np.count_nonzero(own == i) >= pr.min_points]
-            if not split or (len(split) == 1 and np.count_nonzero(own == split[0]) == len(own)):
+            keep = counts >= 2                                      # a track with one point there: noise
+            ids, counts = ids[keep], counts[keep]
+            pick = (counts >= pr.min_points) & (~T.static[ids] if not is_compact[k] else len(ids) >= 2)
+            split = ids[pick]
+            if len(split) == 0 or (len(split) == 1 and counts[pick][0] == len(own)):
                 out.append(cl)
+                flags.append(bool(is_compact[k]))
                 continue
             taken = np.zeros(len(own), bool)
             for i in split:
                 part = own == i
                 taken |= part
                 out.append(Cluster(cl.idx[part], True))
+                flags.append(None)
+                new.append(len(out) - 1)
             if np.any(~taken):
                 out.append(Cluster(cl.idx[~taken], cl.occluded))
-        return out
+                flags.append(None)
+                new.append(len(out) - 1)
+        if new:
+            sub = compact_mask(sp, [out[i] for i in new], pr)
+            for i, c in zip(new, sub):
+                flags[i] = bool(c)
+        return out, np.array(flags, bool)
 
     def update(self, scan: LaserScan, pose: tuple[float, float, float]) -> Obstacles:
         """Process one scan taken at ``scan.stamp`` [s] with the robot at ``pose`` = (x [m], y [m], theta [rad]) in
@@ -141,8 +169,8 @@ class Perception:
 
         sp = scan_to_points(scan, pose, pr)
         self.tracker.predict(float(scan.stamp))
-        clusters = self._segment(sp, cluster_points(sp, pr))
-        is_compact = compact_mask(sp, clusters, pr)
+        clusters = cluster_points(sp, pr)
+        clusters, is_compact = self._segment(sp, clusters, compact_mask(sp, clusters, pr))
         walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
         candidates = [cl for cl, c in zip(clusters, is_compact) if c]
         centers, radii, covs, rounds, compact = [], [], [], [], []
