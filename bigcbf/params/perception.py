@@ -119,8 +119,9 @@ class PerceptionParams:
 
     # --- static / dynamic hysteresis --------------------------------------------------------------------------------
     #: A static track becomes dynamic after n_dynamic consecutive updates with speed > v_dynamic_mps and speed >
-    #: dynamic_sigma standard deviations of the speed estimate; a dynamic one becomes static after n_static
-    #: consecutive updates with speed < v_static_mps. New tracks start static.
+    #: dynamic_sigma standard deviations of the speed estimate (``classify``: the speed must be significant); a
+    #: dynamic one becomes static after n_static consecutive updates with speed < v_static_mps. New tracks start
+    #: static.
     v_dynamic_mps: float = 0.3
     v_static_mps: float = 0.15
     n_dynamic: int = 3

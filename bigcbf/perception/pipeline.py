@@ -1,26 +1,43 @@
-"""LiDAR perception: scan -> points in odom -> clusters -> circles (compact objects) and wall points (extended
-structure) -> tracks (CV Kalman filters, static/dynamic hysteresis) -> Obstacles.
+"""LiDAR perception: scan -> points in odom -> clusters -> circles (compact round objects, walkers) and wall points
+(every other surface) -> tracks (CV Kalman filters, static/dynamic hysteresis) -> Obstacles.
 
 Per scan, with the robot pose (odometry) at the scan's stamp:
 
 1. valid beams become points in odom (``geometry.scan_to_points``), so velocities are not fooled by the robot's
    own motion;
-2. scan-order clustering (``geometry.cluster_points``);
+2. scan-order clustering (``geometry.cluster_points``), then track-aided segmentation (``Perception._segment``):
+   the tracks are predicted to the scan's stamp, and a cluster that holds two known objects (points on the
+   predicted circles of two confirmed tracks, e.g. a walker passing a post, two walkers side by side) or a walker
+   inside an extended cluster (a walker along a wall) is split along them. Without it both tracks starved while the
+   objects were close: crowd_00001 (dev), two walkers side by side made one 0.76 m cluster for a second, both
+   tracks were deleted and a walker was re-acquired 0.46 m from the robot as a static object;
 3. a cluster longer than compact_max_extent_m is a WALL (walls, long or large obstacles). It is not forced into a
-   circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot
-   and points every wall_spacing_m along it. Returns that cannot be trusted as one whole object are wall points too,
-   since their apparent centre would slide as the robot or an occluder moves (phantom velocities): clusters with
-   fewer than min_points, and compact clusters that are not a clean arc (the circle model lost to the rectangle
-   model) and are either partly hidden by a nearer object or seen at a grazing angle (median point spacing above
-   grazing_spacing_factor beam spacings). A partly hidden arc is still a good measurement of its circle;
-4. other compact clusters give a circle (centre, radius) (``geometry.measure_compact``) fed to the tracker; a
-   circle the tracker can neither match nor start a track with (it lies inside a known object but its radius does
-   not match: two objects merged into one cluster) is represented by its wall points;
-5. the output is the confirmed tracks (at most max_tracks, nearest first; ids >= 0, r > 0, cov = KF position
-   covariance, static flag with hysteresis, v = 0 when static) CONCATENATED with the wall points (at most
-   wall_max_points, within wall_range_m of the robot, nearest first; ids -1, r 0, v 0, static, cov from the scan:
-   range noise along the beam and the beam's angular resolution across it, ``geometry.wall_point_covariance``),
-   one CBF constraint each.
+   circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot,
+   points every wall_spacing_m along it and its two ends. Returns that cannot be trusted as one whole object are
+   wall points too: clusters with fewer than min_points; compact clusters that are not a clean arc (the circle model
+   lost to the rectangle model) and are either partly hidden by a nearer object or seen at a grazing angle (median
+   point spacing above grazing_spacing_factor beam spacings), since their apparent centre would slide as the robot
+   or an occluder moves (phantom velocities); and compact clusters that no single model explains: the winning
+   model's RMS residual above fit_rms_ratio_max, or a dent in the outline above concavity_ratio_max, times the range
+   noise's std there (two objects in one cluster; ``geometry.concavity``). A partly hidden arc is still a good
+   measurement of its circle;
+4. the other compact clusters are measured (``geometry.measure_clusters``, the batched ``measure_compact``): a
+   centre, a radius, whether the circle model explained them outright (the object's shape evidence) and the centre's
+   covariance from the fit itself (``geometry.circle_fit_covariance`` / ``rectangle_covariance``: range noise and
+   beam spacing at its points; a far post seen by four beams scatters ten times more than a near one seen by
+   thirty, and a fixed covariance made the far ones' jitter look like motion). They update or start tracks
+   (``tracker.Tracker.step``); a circle the tracker can neither match nor start a track with (it lies inside a
+   known object but its radius does not match) is represented by its wall points;
+5. the output (``tracker.Tracker.report``) is a list of CIRCLES: the confirmed tracks that are dynamic or round, at
+   most max_tracks, nearest first (ids >= 0, r > 0, cov = the filter's position covariance, static flag with
+   hysteresis, v = 0 when static), CONCATENATED with the WALL POINTS (at most wall_max_points, within wall_range_m
+   of the robot, nearest first; ids -1, r 0, v 0, static, cov from the scan: range noise along the beam and the
+   beam's angular resolution across it, ``geometry.wall_point_covariance``), one CBF constraint each. The wall
+   points come from the walls and rejected clusters of this scan and from the SURFACES of the tracks not reported
+   as circles: a static track that is not round (a box, a wall's end, a bottleneck's jamb), the tracks beyond the
+   budget, and the tentative tracks measured in this scan (an object seen for the first time is an obstacle
+   before its track is confirmed). A track's surface is the cluster of its last measurement, so a static box
+   hidden for a moment keeps its points while its track coasts.
 
 Why wall points: the CBF adds one constraint per obstacle, and a circle around a wall would either swallow the
 corridor or miss the wall's ends. A wall point has radius 0, so the robot keeps D = r_R + d0 + margin from the wall
@@ -28,11 +45,21 @@ surface; between two points wall_spacing_m apart the clearance loses at most D -
 1.5 cm for D = 0.35 m and 0.2 m spacing). Nearest first with a cap keeps the QP small where it matters: around the
 robot, on every nearby wall (each wall cluster contributes its nearest point).
 
+Why a box is not a circle: the rectangle fit completes a box into a square of its long side (its depth is unseen),
+and the circle around that square reaches (sqrt 2 - 1) / 2 of the side beyond each face: 0.15 m for a 0.76 m deep
+bottleneck's jamb, whose circle (r ~ 0.53 m) closed a 1.1 m opening to 0.8 m for every method (doorway_00000 and
+doorway_00001, dev). Its surface points are exact.
+
+Why the budget is kept at eight circles (max_tracks, the paper's "at most eight tracked entities", Sec. V): beyond
+it, a track is not dropped but reported by its surface points (a post field of 14-19 posts lost the far posts
+from the output entirely before); the circles are what the CBF keeps one row each for (``control/cbf.py``).
+
 Limitations (documented choices): a scan is taken as instantaneous (no per-beam motion correction); wall points come
-from the current scan only (no map); an object closer than the breakpoint distance (~0.2-0.3 m at 2 m) to a wall or
-to another object merges with it into one cluster for those scans (its track coasts, the merged returns are wall
-points); a moving pedestrian is reported static (v = 0) until its speed has exceeded v_dynamic_mps for n_dynamic
-updates.
+from the current scan only (no map) or a track's last cluster; an object closer than the breakpoint distance
+(~0.2-0.3 m at 2 m) to a wall or to another object that is not yet tracked merges with it into one cluster for
+those scans (the merged returns are wall points); a moving pedestrian is reported static (v = 0) until its speed
+has exceeded v_dynamic_mps and dynamic_sigma standard deviations for n_dynamic updates (three updates for a
+walker measured well, i.e. near the robot).
 """
 from __future__ import annotations
 

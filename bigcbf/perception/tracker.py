@@ -1,25 +1,34 @@
 """Multi-object tracker: gating, assignment, track birth / confirmation / coasting / deletion, one CV Kalman filter
-per track, static/dynamic hysteresis. Tracks are kept as arrays (a few dozen at most).
+per track, static/dynamic hysteresis, each track's shape (round or not) and last surface. Tracks are kept as arrays
+(a few dozen at most).
 
 Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
 * classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits measurements
-  (default 1: from its second measurement on; a higher value suppresses phantom dynamic tracks, e.g. a 0.15 m bin
-  4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range noise, jumped 11 cm between its first two
-  fits and was classified dynamic at its fourth scan, but delays a pedestrian who appears near the robot: see
-  PerceptionParams.classify_after_hits);
+  (default 1: from its second measurement on). A phantom velocity of a static object is kept out by the
+  measurement covariances and the significance test, not by waiting: each measurement comes with the covariance
+  of its own fit (``geometry.circle_fit_covariance``), so a 0.15 m bin 4.5 m away seen by four beams (its first
+  fits jumped 11 cm) has a centre std of ~8 cm along the line of sight and its velocity estimate a large std,
+  and dynamic_sigma = 2 asks for a speed twice that std. With the former fixed 5 cm std and a 1-sigma test, far
+  posts of the dev split's post fields were dynamic in up to 9 % of the scans of an episode (posts_00001); a
+  walker near the robot, measured to 1-2 cm, still turns dynamic at its fourth measurement;
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
   pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted; while it coasts,
   its reported covariance is bounded by physics (:func:`coast_bound`);
-* at most max_candidates tracks are kept (the farthest are dropped); the output is the max_tracks confirmed tracks
-  nearest to the robot (distance to their surface, |p - p_robot| - r).
+* at most max_candidates tracks are kept (the farthest are dropped); :meth:`Tracker.report` gives the circles
+  (confirmed, dynamic or round, the max_tracks nearest by distance to their surface, |p - p_robot| - r) and the
+  surfaces of the others (static and not round, beyond the budget, tentative ones measured now).
+Shape: a track is round while the smoothed share (factor shape_smoothing) of its measurements that the circle
+model explained outright (``geometry.Measurement.round``) is at least 1/2; it starts with its first measurement's.
 Association: cost = Euclidean distance between the predicted centre and a cluster centre; a pair is allowed when
-its Mahalanobis distance squared (innovation covariance S = P_pos + R) is below gate_chi2 or its distance is below
-gate_min_m, never beyond gate_max_m, and only when the cluster's radius is within gate_radius_m of the track's (two
-objects merged into one cluster, e.g. a pedestrian passing a post, must not drag the post's track); the assignment
-minimising the total cost is scipy's linear_sum_assignment.
+its Mahalanobis distance squared (innovation covariance S = P_pos + R, R the measurement's fit covariance plus
+fit_model_sigma_m^2 I) is below gate_chi2 or its distance is below gate_min_m, never beyond gate_max_m, and only
+when the cluster's radius is within gate_radius_m of the track's (two objects merged into one cluster, e.g. a
+pedestrian passing a post, must not drag the post's track); the assignment minimising the total cost is scipy's
+linear_sum_assignment. Before that, the pipeline splits clusters that hold two known objects along the tracks'
+predicted circles (:meth:`Tracker.surface_owner`, ``pipeline.Perception._segment``).
 
 Two filters per track. The constant-velocity Kalman filter (``kalman``) estimates every track's velocity and drives
 the static/dynamic classification; dynamic tracks report its position and covariance. Static tracks report a
