@@ -363,3 +363,91 @@ def test_pedestrian_passing_close_to_a_post_does_not_drag_it():
         post_ids.add(int(tr.ids[j]))
     assert len(post_ids) == 1
     assert not tracks(res[-1][2]).static[track_near(res[-1][2], ped(4.0)[:2])]
+
+
+def _confirmed_perception(centres, radii, static=True):
+    """A Perception whose tracker holds confirmed, motionless tracks of these circles (three exact measurements)."""
+    perc = Perception()
+    z, r = np.asarray(centres, float), np.asarray(radii, float)
+    for k in range(3):
+        perc.tracker.step(0.1 * k, z, r, np.zeros(2), 1e-4 * np.eye(2)[None].repeat(len(z), 0))
+    assert perc.tracker.confirmed.all()
+    perc.tracker.static[:] = static
+    return perc
+
+
+def test_segmentation_splits_two_known_objects_in_one_cluster():
+    """Two walkers (r 0.25 m) side by side 3 m ahead, 0.04 m apart: one scan-order cluster (the breakpoint distance
+    there is ~0.2 m). With their tracks known, _segment splits it along their predicted circles: two clusters,
+    each exactly the beams that hit one circle, both marked partly hidden, both compact."""
+    from bigcbf.perception.geometry import cluster_points, compact_mask, scan_to_points
+    a, b = (3.0, -0.27, 0.25), (3.0, 0.27, 0.25)
+    perc = _confirmed_perception([a[:2], b[:2]], [a[2], b[2]], static=False)
+    pr = perc.params
+    scan = ray_scan(STILL(0.3), [a, b], stamp=0.3)
+    sp = scan_to_points(scan, STILL(0.3), pr)
+    clusters = cluster_points(sp, pr)
+    assert len(clusters) == 1                                         # merged without the tracks
+    perc.tracker.predict(0.3)
+    out, compact = perc._segment(sp, clusters, compact_mask(sp, clusters, pr))
+    assert len(out) == 2 and compact.tolist() == [True, True] and all(c.occluded for c in out)
+    assert sorted(np.concatenate([c.idx for c in out]).tolist()) == sorted(clusters[0].idx.tolist())
+    for c in out:                                                    # each part lies on one circle (exact rays)
+        q = sp.xy[c.idx]
+        on_a = np.abs(np.linalg.norm(q - a[:2], axis=1) - a[2]) < 1e-6
+        on_b = np.abs(np.linalg.norm(q - b[:2], axis=1) - b[2]) < 1e-6
+        assert on_a.all() or on_b.all()
+    # the whole pipeline on that scan: both walkers are measured (two circles at their centres, no wall points)
+    obs = perc.update(scan, STILL(0.3))
+    tr = tracks(obs)
+    assert len(tr) == 2 and len(walls(obs)) == 0
+    assert sorted(np.linalg.norm(tr.p - np.array([a[:2], b[:2]])[:, None], axis=2).min(axis=0)) < [0.02, 0.02]
+
+
+def test_segmentation_cuts_a_walker_out_of_a_wall_but_not_a_post():
+    """An extended cluster (a wall at y = 1) with a walker (dynamic track, r 0.25 m) touching it: the walker's points
+    become a cluster of their own, the wall's stay one; a static post against the wall is left in the wall cluster
+    (only walkers are cut out of extended clusters: a static track there is most likely part of the structure)."""
+    from bigcbf.perception.geometry import cluster_points, compact_mask, scan_to_points
+    wall = [(0.5, 1.0, 4.0, 1.0)]
+    walker = (2.0, 0.73, 0.25)                                     # 0.02 m from the wall
+    for static, n_expect in ((False, 2), (True, 1)):
+        perc = _confirmed_perception([walker[:2]], [walker[2]], static=static)
+        pr = perc.params
+        scan = ray_scan(STILL(0.3), [walker], wall, stamp=0.3)
+        sp = scan_to_points(scan, STILL(0.3), pr)
+        clusters = cluster_points(sp, pr)
+        mask = compact_mask(sp, clusters, pr)
+        assert len(clusters) == 1 and not mask[0]
+        perc.tracker.predict(0.3)
+        out, compact = perc._segment(sp, clusters, compact_mask(sp, clusters, pr))
+        assert len(out) == n_expect
+        if not static:
+            w = [c for c, k in zip(out, compact) if k]
+            assert len(w) == 1
+            # the walker's cluster: every beam that hit its circle, plus the few wall returns within the ownership
+            # tolerance of the circle (merge_tol_m + 2 sigma, ``Tracker.surface_owner``) where the wall passes 2 cm
+            # from it; the rest of the wall stays one cluster
+            T = perc.tracker
+            tol = pr.merge_tol_m + 2 * np.sqrt(np.linalg.eigvalsh(T.P[0, :2, :2])[-1])
+            off = np.abs(np.linalg.norm(sp.xy - walker[:2], axis=1) - walker[2])
+            on_circle = set(np.flatnonzero(off < 1e-6).tolist())
+            mine = set(w[0].idx.tolist())
+            assert on_circle <= mine and np.all(off[w[0].idx] <= tol)
+            assert len(mine - on_circle) <= 4
+            rest = sp.xy[[c for c, k in zip(out, compact) if not k][0].idx]
+            assert np.all(np.abs(rest[:, 1] - 1.0) < 1e-6)              # the wall's points stay together
+
+
+def test_segmentation_leaves_single_objects_alone():
+    """A cluster on one track's circle only (a post alone, a walker alone) is passed through unchanged."""
+    from bigcbf.perception.geometry import cluster_points, compact_mask, scan_to_points
+    post = (2.5, 0.0, 0.2)
+    for static in (True, False):
+        perc = _confirmed_perception([post[:2]], [post[2]], static=static)
+        sp = scan_to_points(ray_scan(STILL(0.3), [post], stamp=0.3), STILL(0.3), perc.params)
+        clusters = cluster_points(sp, perc.params)
+        mask = compact_mask(sp, clusters, perc.params)
+        perc.tracker.predict(0.3)
+        out, compact = perc._segment(sp, clusters, mask)
+        assert out is clusters and compact is mask
