@@ -61,6 +61,20 @@ class PerceptionParams:
     fit_span_ratio: float = 0.5
     #: Track radius: exponential smoothing factor of the measured radius (1 = last measurement only).
     radius_smoothing: float = 0.3
+    #: Track shape: exponential smoothing factor of the share of its clusters the circle model explained; a track
+    #: is round while that share is at least 1/2. A static track that is not round (a box, a wall end, a corner)
+    #: is reported as points on its surface, not as its circumscribed circle (``tracker.Tracker.report``).
+    shape_smoothing: float = 0.3
+    #: A compact cluster whose best model (circle or rectangle) leaves an RMS residual above fit_rms_ratio_max
+    #: times the range noise's std at its range is not one simple object (two objects merged into one cluster):
+    #: it becomes wall points, not a track measurement. Single posts and boxes on recorded scans: at most 1.3 and
+    #: 2.2 times.
+    fit_rms_ratio_max: float = 3.0
+    #: ...likewise a compact cluster whose outline dents away from the sensor by more than concavity_ratio_max
+    #: times that std (``geometry.concavity``: a convex object bulges toward the sensor; two objects in one cluster
+    #: leave a dent between them). Single posts, boxes and walkers on recorded scans: at most 4.3 times; with the
+    #: RMS test this catches 59 % of the clusters that hold two or more objects.
+    concavity_ratio_max: float = 5.0
 
     # --- association and track management ---------------------------------------------------------------------------
     #: A cluster may update a track when its Mahalanobis distance squared is below gate_chi2 (2 dof; 9.21 = 99 %)
@@ -70,6 +84,10 @@ class PerceptionParams:
     gate_max_m: float = 1.0
     #: ...and only when the cluster's radius is within gate_radius_m of the track's.
     gate_radius_m: float = 0.15
+    #: Track-aided segmentation (``pipeline.Perception._segment``): a scan point lies on a confirmed track's object
+    #: when it is within merge_tol_m plus twice the track's position std of its predicted circle
+    #: (``tracker.Tracker.surface_owner``); a cluster holding two known objects is split along them.
+    merge_tol_m: float = 0.05
     #: At most max_tracks confirmed tracks are returned (nearest first); up to max_candidates are maintained.
     max_tracks: int = 8
     max_candidates: int = 32
@@ -89,27 +107,32 @@ class PerceptionParams:
     walk_accel_max_mps2: float = 2.5
 
     # --- constant-velocity Kalman filter ----------------------------------------------------------------------------
-    #: Measurement noise of a cluster centre (standard deviation per axis).
-    meas_sigma_m: float = 0.05
+    #: A cluster centre's measurement covariance is its fit's own (from the range noise and the beam spacing at its
+    #: points, ``geometry.circle_fit_covariance`` / ``rectangle_covariance``: a far post seen by four beams is a
+    #: poorer measurement than a near one seen by thirty) plus this model error squared, per axis [m] (the object is
+    #: not exactly a circle or a box, the scan not instantaneous). 0.01 m: on recorded scans of posts the fitted
+    #: centres' normalised squared errors then average 2.0-2.3 (chi-square, 2 dof: 2) from 5 to 20 points.
+    fit_model_sigma_m: float = 0.01
     #: Power spectral density of the white-noise acceleration (m^2/s^3).
     accel_psd_m2ps3: float = 0.5
     #: Initial velocity standard deviation of a new track (velocity starts at 0).
     init_vel_sigma_mps: float = 1.5
     #: Static tracks report the estimate of a constant-position Kalman filter run beside the CV filter: the position
     #: is a random walk of this power spectral density [m^2/s] (the fitted centre of a post wanders as the viewpoint
-    #: changes: 1e-3 m^2/s gives a steady-state std of ~2 cm at 10 Hz with meas_sigma_m = 0.05). When its estimate
+    #: changes: 1e-3 m^2/s gives a steady-state std of ~2 cm at 10 Hz with a 5 cm measurement std). When its estimate
     #: and the CV filter's disagree beyond gate_chi2 (the object moves), it restarts from the CV filter's.
     static_pos_psd_m2ps: float = 1e-3
 
     # --- static / dynamic hysteresis --------------------------------------------------------------------------------
     #: A static track becomes dynamic after n_dynamic consecutive updates with speed > v_dynamic_mps and speed >
-    #: dynamic_sigma standard deviations of the speed estimate; a dynamic one becomes static after n_static
-    #: consecutive updates with speed < v_static_mps. New tracks start static.
+    #: dynamic_sigma standard deviations of the speed estimate (``classify``: the speed must be significant); a
+    #: dynamic one becomes static after n_static consecutive updates with speed < v_static_mps. New tracks start
+    #: static.
     v_dynamic_mps: float = 0.3
     v_static_mps: float = 0.15
     n_dynamic: int = 3
     n_static: int = 5
-    dynamic_sigma: float = 1.0
+    dynamic_sigma: float = 2.0
     #: The classification starts once a track's velocity rests on more than this many measurements. 1: from the
     #: second measurement on. 3 (= confirm_hits) suppressed phantom dynamic tracks of small far objects (a new track's
     #: first velocities are differences of two or three noisy centres) but delayed a pedestrian who appears near the
@@ -138,14 +161,15 @@ class PerceptionParams:
             if isinstance(v, float) and not math.isfinite(v):
                 raise ValueError(f"{f.name} must be finite")
         positive = ("cluster_dist_m", "grazing_spacing_factor", "compact_max_extent_m",
-                    "radius_min_m", "gate_chi2", "gate_max_m", "gate_radius_m", "coast_s", "meas_sigma_m",
+                    "radius_min_m", "gate_chi2", "gate_max_m", "gate_radius_m", "coast_s",
                     "init_vel_sigma_mps", "v_static_mps", "wall_spacing_m", "wall_range_m", "walk_speed_max_mps",
-                    "walk_accel_max_mps2")
+                    "walk_accel_max_mps2", "fit_rms_ratio_max", "merge_tol_m",
+                    "concavity_ratio_max")
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
         non_negative = ("range_sigma_m", "range_sigma_frac", "fit_span_ratio", "fit_min_arc_rad", "gate_min_m",
-                        "accel_psd_m2ps3", "static_pos_psd_m2ps", "dynamic_sigma", "wall_cov_m2",
+                        "accel_psd_m2ps3", "static_pos_psd_m2ps", "fit_model_sigma_m", "dynamic_sigma", "wall_cov_m2",
                         "ground_truth_cov_m2")
         for name in non_negative:
             if getattr(self, name) < 0:
@@ -156,6 +180,8 @@ class PerceptionParams:
             raise ValueError("radius_max_m must be >= radius_min_m")
         if not 0 < self.radius_smoothing <= 1:
             raise ValueError("radius_smoothing must be in (0, 1]")
+        if not 0 < self.shape_smoothing <= 1:
+            raise ValueError("shape_smoothing must be in (0, 1]")
         if self.gate_min_m > self.gate_max_m:
             raise ValueError("gate_min_m must be <= gate_max_m")
         if self.min_points < 2:

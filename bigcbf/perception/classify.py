@@ -3,8 +3,12 @@
 Two speed thresholds form a band, v_static_mps < v_dynamic_mps, and two dwell counts debounce the switch:
 
 * a STATIC track becomes DYNAMIC after n_dynamic consecutive measurement updates whose speed estimate exceeds both
-  v_dynamic_mps and dynamic_sigma standard deviations of the speed estimate (so the large velocity uncertainty of
-  a young track cannot flip it);
+  v_dynamic_mps and dynamic_sigma standard deviations of the speed estimate: the speed must be significant, so
+  neither the large velocity uncertainty of a young track nor the jitter of a far object's fitted centre (whose
+  measurement covariance says how poor it is, ``geometry.circle_fit_covariance``) can flip it. dynamic_sigma = 2:
+  the speed estimate of a static object (a 2-D zero-mean Gaussian velocity error: |v| is Rayleigh distributed)
+  exceeds 2 of its standard deviations in exp(-2) = 14 % of the updates, 1 in exp(-1/2) = 61 %, and consecutive
+  updates are correlated (the filter smooths), so n_dynamic does not multiply these odds;
 * a DYNAMIC track becomes STATIC after n_static consecutive updates with speed below v_static_mps;
 * a speed inside the band resets both counters; a track starts STATIC (velocity 0 is its prior).
 

@@ -189,7 +189,7 @@ def _edge_distances(points: np.ndarray, e1: np.ndarray, e2: np.ndarray):
     return amin, amax, bmin, bmax, d
 
 
-def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, float, float]:
+def fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):
     """Rectangle (L-shape) fit: the orientation whose bounding rectangle the points hug best, i.e. the least sum of
     squared distances from each point to the nearest edge (a search-based L-shape fit in the manner of Zhang et al.
     2017, "Efficient L-shape fitting for vehicle detection using laser scanners", with a squared-distance criterion;
@@ -199,7 +199,8 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, f
     second face of an L seen at a grazing angle is sampled by few beams (its length is underestimated by up to one
     beam spacing along it). The rectangle is therefore completed into a square of its long side, extending away
     from the sensor: exact for square boxes, conservative for an L of an oblong box. Returns (center (2,),
-    radius = half the square's diagonal, rms of the points' distance to the nearest edge).
+    radius = half the square's diagonal, rms of the points' distance to the nearest edge); with ``full`` also the
+    axes (2, 2) (rows e1, e2) and the points' extents (la, lb) along them.
     """
     *_, d = _edge_distances(points, _COARSE_E1, _COARSE_E2)
     ang = _COARSE[int(np.argmin(np.einsum("kn,kn->k", d, d)))] + _FINE
@@ -216,7 +217,79 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, f
     if normal @ (center - sensor) < 0:
         normal = -normal
     center = center + (long_ - short) / 2 * normal
+    if full:
+        return center, long_ / np.sqrt(2), rms, np.stack([e1, e2]), (la, lb)
     return center, long_ / np.sqrt(2), rms
+
+
+def point_variances(points: np.ndarray, normals: np.ndarray, sensor: np.ndarray, angle_increment: float,
+                    params: PerceptionParams) -> np.ndarray:
+    """Variance [m^2] of each LiDAR point's offset along the model's surface normal there (unit ``normals`` (n,2)):
+    the range noise along the beam, sigma_r = range_sigma_m + range_sigma_frac r, and the beam's angular
+    resolution across it, sigma_t = r dphi / sqrt(12) (as ``wall_point_covariance``), projected on the normal:
+    sigma_r^2 cos^2 a + sigma_t^2 sin^2 a, a the angle between the beam and the normal."""
+    b = points - sensor
+    r = np.sqrt(b[:, 0] * b[:, 0] + b[:, 1] * b[:, 1])
+    cos = (b[:, 0] * normals[:, 0] + b[:, 1] * normals[:, 1]) / np.maximum(r, 1e-12)
+    cos2 = np.minimum(cos * cos, 1.0)
+    sr = params.range_sigma_m + params.range_sigma_frac * r
+    return sr * sr * cos2 + (r * angle_increment) ** 2 / 12.0 * (1.0 - cos2)
+
+
+def circle_fit_covariance(points: np.ndarray, center: np.ndarray, radius: float, sensor: np.ndarray,
+                          angle_increment: float, params: PerceptionParams, fit_radius: bool = True) -> np.ndarray:
+    """Covariance (2, 2) [m^2] of a circle fit's centre: the weighted least-squares covariance (J^T W J)^-1 of the
+    geometric fit (residuals e_i = |p_i - c| - r, J_i = d e_i / d(c_x, c_y, r) = (-n_i, -1) with n_i the outward
+    normal at point i, W = diag(1 / var_i) from :func:`point_variances`), its centre block; with the radius free
+    (``fit_radius``) the radius's uncertainty is marginalised in, which is what makes a short arc's centre
+    uncertain along the line of sight. With the radius clamped (not fitted) the centre moves one for one with the
+    unknown radius along the line of sight: a uniform spread over [radius_min_m, radius_max_m] is added there.
+    Standard deviations are capped at radius_max_m (the centre lies within that of the seen surface)."""
+    u = points - center
+    d = np.maximum(np.sqrt(u[:, 0] * u[:, 0] + u[:, 1] * u[:, 1]), 1e-12)
+    nrm = u / d[:, None]
+    w = 1.0 / np.maximum(point_variances(points, nrm, sensor, angle_increment, params), 1e-12)
+    J = np.column_stack([-nrm, -np.ones(len(points))])
+    A = (J * w[:, None]).T @ J
+    cap = params.radius_max_m ** 2
+    try:
+        C = np.linalg.inv(A)[:2, :2] if fit_radius else np.linalg.inv(A[:2, :2])
+    except np.linalg.LinAlgError:
+        return cap * np.eye(2)
+    if not fit_radius:
+        ray = center - sensor
+        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    C = 0.5 * (C + C.T)
+    if not np.all(np.isfinite(C)):
+        return cap * np.eye(2)
+    return _cap_std(C, params.radius_max_m)
+
+
+def _cap_std(C: np.ndarray, sigma_max: float) -> np.ndarray:
+    """Scale a 2x2 covariance down so that its largest standard deviation is at most sigma_max."""
+    a, b, c = C[0, 0], C[0, 1], C[1, 1]
+    lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return C * (sigma_max ** 2 / lam) if lam > sigma_max ** 2 else C
+
+
+def rectangle_covariance(points: np.ndarray, axes: np.ndarray, lengths: tuple[float, float], sensor: np.ndarray,
+                         angle_increment: float, params: PerceptionParams) -> np.ndarray:
+    """Covariance (2, 2) [m^2] of a rectangle fit's centre (``fit_rectangle``). Along each of the rectangle's axes
+    e_k (``axes`` (2, 2), rows) the centre is the middle of the points' extent: each end is known to within the
+    range noise and the beam spacing at the cluster's range (the silhouette lies between two beams: a uniform
+    spread of r dphi), and the depth that no beam sees is unknown: the rectangle was completed into a square of
+    its long side (``fit_rectangle``), so along the shorter extent the centre may lie anywhere over the missing
+    length (long - short), a uniform spread (long - short)^2 / 12."""
+    r = float(np.mean(np.linalg.norm(points - sensor, axis=1)))
+    sr = params.range_sigma_m + params.range_sigma_frac * r
+    end = sr * sr + (r * angle_increment) ** 2 / 12.0                 # one end of the extent
+    la, lb = lengths
+    short, long_ = min(la, lb), max(la, lb)
+    var = np.full(2, 0.5 * end)                                        # the middle of two ends: (2 end) / 4
+    var[int(np.argmin([la, lb]))] += (long_ - short) ** 2 / 12.0
+    C = axes.T @ np.diag(var) @ axes
+    return _cap_std(0.5 * (C + C.T), params.radius_max_m)
 
 
 @dataclass(frozen=True)
@@ -224,11 +297,16 @@ class Measurement:
     center: np.ndarray       # (2,) odom [m]
     radius: float            # [m]
     arc_fit: bool            # True: the circle model won; False: the rectangle model
+    cov: np.ndarray = None   # (2, 2) covariance of the centre [m^2] (circle_fit_covariance / rectangle_covariance)
+    rms: float = 0.0         # RMS residual of the winning model [m]
+    rms_expected: float = 0.0  # the RMS residual the sensor's noise alone would give there [m]
+    round: bool = False      # the circle model explained the points outright: won, and without the tie tolerance
 
 
 def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionParams,
                     occluded: bool = False, angle_increment: float = 2 * np.pi / 360) -> Measurement:
-    """Centre and radius of a compact cluster: the better of a circle model and a rectangle model.
+    """Centre, radius and centre covariance of a compact cluster: the better of a circle model and a rectangle
+    model.
 
     The centroid of an arc seen from one side is biased toward the sensor (by 2r/pi for a half circle), so it is
     not used. Circle model: the algebraic fit (``fit_circle``); when its radius falls outside [radius_min_m,
@@ -245,7 +323,13 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
       spacing at each silhouette). A flat face fits a wide circle with a narrow arc; a real circle shows nearly
       half of itself.
 
-    The radius is clamped to [radius_min_m, radius_max_m].
+    The radius is clamped to [radius_min_m, radius_max_m]. The centre's covariance is the winning model's
+    (``circle_fit_covariance``, ``rectangle_covariance``): a far post seen by four beams is a much poorer
+    measurement than a near one seen by thirty, and the tracker weighs (and gates) it accordingly. ``rms`` is the
+    winning model's RMS residual and ``rms_expected`` the range noise's std at the cluster's mean range: a cluster
+    that no model explains (two objects merged, ``Perception``) has rms far above it. ``round``: the circle model
+    won outright (also without the tie tolerance, or it fit within the noise): the evidence the tracker uses for the
+    object's shape (a box seen by few beams often wins the circle model on the tie tolerance only).
     """
     dx, dy = points[:, 0] - sensor[0], points[:, 1] - sensor[1]
     dist = np.sqrt(dx * dx + dy * dy)
@@ -253,15 +337,20 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
     near = points[k]
     ray = (near - sensor) / max(float(dist[k]), 1e-9)
     c, r, rms = fit_circle(points)
-    tol = params.range_sigma_m + params.range_sigma_frac * float(dist.mean())
+    sigma = params.range_sigma_m + params.range_sigma_frac * float(dist.mean())
+    tol = sigma
+    fitted = True
     if not (np.isfinite(r) and params.radius_min_m <= r <= params.radius_max_m and ray @ (c - near) > 0):
         r = float(np.clip(r if np.isfinite(r) else params.radius_max_m, params.radius_min_m, params.radius_max_m))
         c, rms = fit_circle_fixed_radius(points, r, near + r * ray)
         tol = 0.0
+        fitted = False
     if tol > 0 and rms <= tol:
-        rms_rect = np.inf                   # rms <= rms_rect + tol holds whatever the rectangle: skip its search
+        rect = None                         # rms <= rms_rect + tol holds whatever the rectangle: skip its search
+        rms_rect = np.inf
     else:
-        rc, rr, rms_rect = fit_rectangle(points, sensor)
+        rect = fit_rectangle(points, sensor, full=True)
+        rms_rect = rect[2]
     if rms <= rms_rect + tol and ray @ (c - near) > 0:
         u = points - c
         mid = u.mean(axis=0)
@@ -272,15 +361,176 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
             sampled = min(np.arccos(min(r / d, 1.0)), np.arcsin(np.clip((r - d * angle_increment) / r, 0.0, 1.0)))
             need = max(need, params.fit_span_ratio * 2 * sampled)
         if span >= need:
-            return Measurement(c, r, True)
-    if not np.isfinite(rms_rect):
-        rc, rr, _ = fit_rectangle(points, sensor)
-    return Measurement(rc, float(np.clip(rr, params.radius_min_m, params.radius_max_m)), False)
+            cov = circle_fit_covariance(points, c, r, sensor, angle_increment, params, fit_radius=fitted)
+            return Measurement(c, r, True, cov, float(rms), sigma, bool(rms <= rms_rect))
+    if rect is None:
+        rect = fit_rectangle(points, sensor, full=True)
+    rc, rr, rms_rect, axes, lengths = rect
+    cov = rectangle_covariance(points, axes, lengths, sensor, angle_increment, params)
+    return Measurement(rc, float(np.clip(rr, params.radius_min_m, params.radius_max_m)), False, cov,
+                       float(rms_rect), sigma)
+
+
+def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -> tuple[list, np.ndarray]:
+    """:func:`measure_compact` and :func:`concavity` (k = 2) of many compact clusters at once: the algebraic circle
+    fits, residuals, arc spans, covariances and dents of all clusters in a few array operations over their
+    concatenated points (np.*.reduceat), the fixed-radius refits and rectangle fits in a loop over the clusters
+    that need them. Same results as calling the two per cluster (to rounding: sums run in another order); the
+    per-cluster functions stay the reference (``tests/perception/test_geometry.py``).
+
+    ``clusters``: Cluster objects of at least 3 points. Returns (measurements, dents [m])."""
+    m = len(clusters)
+    if m == 0:
+        return [], np.zeros(0)
+    pr = params
+    n = np.array([len(c.idx) for c in clusters])
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    idx = np.concatenate([c.idx for c in clusters])
+    g = np.repeat(np.arange(m), n)
+    P = sp.xy[idx]
+    px, py = P[:, 0], P[:, 1]
+    sensor = sp.sensor
+    dx, dy = px - sensor[0], py - sensor[1]
+    dist = np.sqrt(dx * dx + dy * dy)
+    # nearest point of each cluster (the first one at the minimum, as np.argmin)
+    dmin = np.minimum.reduceat(dist, starts)
+    cand = np.where(dist == dmin[g], np.arange(len(idx)), len(idx))
+    k_near = np.minimum.reduceat(cand, starts)
+    near = P[k_near]
+    ray = (near - sensor) / np.maximum(dmin, 1e-9)[:, None]
+    sigma = pr.range_sigma_m + pr.range_sigma_frac * np.add.reduceat(dist, starts) / n
+    # algebraic (Kasa) circle fits, as fit_circle
+    mean = np.add.reduceat(P, starts) / n[:, None]
+    u, v = px - mean[g, 0], py - mean[g, 1]
+    uu, vv, uv = u * u, v * v, u * v
+    suu, svv, suv = np.add.reduceat(uu, starts), np.add.reduceat(vv, starts), np.add.reduceat(uv, starts)
+    w = uu + vv
+    b1, b2 = 0.5 * np.add.reduceat(u * w, starts), 0.5 * np.add.reduceat(v * w, starts)
+    det = suu * svv - suv * suv
+    good = (n >= 3) & (det > 1e-10 * (suu + svv) ** 2)
+    sdet = np.where(good, det, 1.0)
+    uc = np.where(good, (svv * b1 - suv * b2) / sdet, 0.0)
+    vc = np.where(good, (suu * b2 - suv * b1) / sdet, 0.0)
+    r = np.where(good, np.sqrt(uc * uc + vc * vc + (suu + svv) / n), np.inf)
+    c = mean + np.stack([uc, vc], axis=1)
+    res = np.sqrt((u - uc[g]) ** 2 + (v - vc[g]) ** 2) - np.where(good, r, 0.0)[g]
+    rms = np.where(good, np.sqrt(np.add.reduceat(res * res, starts) / n), np.inf)
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
+    tol = np.where(fitted, sigma, 0.0)
+    for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
+        rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
+        pts = P[starts[j]: starts[j] + n[j]]
+        cj, rmsj = fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
+        c[j], r[j], rms[j] = cj, rj, rmsj
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    # arc span seen from the centre, as measure_compact
+    u2x, u2y = px - c[g, 0], py - c[g, 1]
+    midx, midy = np.add.reduceat(u2x, starts) / n, np.add.reduceat(u2y, starts) / n
+    ang = np.arctan2(u2x * midy[g] - u2y * midx[g], u2x * midx[g] + u2y * midy[g])
+    span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
+    dc = np.linalg.norm(c - sensor, axis=1)
+    rr = np.where(np.isfinite(r), r, 1.0)
+    sampled = np.minimum(np.arccos(np.minimum(rr / np.maximum(dc, 1e-12), 1.0)),
+                         np.arcsin(np.clip((rr - dc * sp.angle_increment) / rr, 0.0, 1.0)))
+    occluded = np.array([cl.occluded for cl in clusters])
+    need = np.where(occluded, pr.fit_min_arc_rad,
+                    np.maximum(pr.fit_min_arc_rad, pr.fit_span_ratio * 2 * sampled))
+    # point weights for the circle covariances (point_variances with the outward normals)
+    d2 = np.maximum(np.sqrt(u2x * u2x + u2y * u2y), 1e-12)
+    nx, ny = u2x / d2, u2y / d2
+    cos = (dx * nx + dy * ny) / np.maximum(dist, 1e-12)
+    cos2 = np.minimum(cos * cos, 1.0)
+    sr = pr.range_sigma_m + pr.range_sigma_frac * dist
+    wt = 1.0 / np.maximum(sr * sr * cos2 + (dist * sp.angle_increment) ** 2 / 12.0 * (1.0 - cos2), 1e-12)
+    a11, a12, a22 = (np.add.reduceat(wt * nx * nx, starts), np.add.reduceat(wt * nx * ny, starts),
+                     np.add.reduceat(wt * ny * ny, starts))
+    a13, a23, a33 = np.add.reduceat(wt * nx, starts), np.add.reduceat(wt * ny, starts), np.add.reduceat(wt, starts)
+    # dents (concavity, k = 2): the point two ahead against the chord from two before to two after
+    dents = np.zeros(m)
+    N = len(idx)
+    if N > 4:
+        ia = np.arange(N - 4)
+        same = g[ia] == g[ia + 4]
+        if same.any():
+            ia = ia[same]
+            a_, b_, c_ = P[ia], P[ia + 2], P[ia + 4]
+            ex, ey = c_[:, 0] - a_[:, 0], c_[:, 1] - a_[:, 1]
+            length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
+            side_b = ex * (b_[:, 1] - a_[:, 1]) - ey * (b_[:, 0] - a_[:, 0])
+            side_s = ex * (sensor[1] - a_[:, 1]) - ey * (sensor[0] - a_[:, 0])
+            np.maximum.at(dents, g[ia], -np.sign(side_s) * side_b / length)
+    out = []
+    for j in range(m):
+        pts = P[starts[j]: starts[j] + n[j]]
+        if tol[j] > 0 and rms[j] <= tol[j]:
+            rect, rms_rect = None, np.inf
+        else:
+            rect = fit_rectangle(pts, sensor, full=True)
+            rms_rect = rect[2]
+        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
+            cov = _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
+                                        c[j], sensor, pr)
+            out.append(Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
+                                   bool(rms[j] <= rms_rect)))
+            continue
+        if rect is None:
+            rect = fit_rectangle(pts, sensor, full=True)
+        rc, rrad, rms_rect, axes, lengths = rect
+        cov = rectangle_covariance(pts, axes, lengths, sensor, sp.angle_increment, pr)
+        out.append(Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
+                               float(rms_rect), float(sigma[j])))
+    return out, dents
+
+
+def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
+    """circle_fit_covariance from the entries of J^T W J (closed-form inverses)."""
+    cap = params.radius_max_m ** 2
+    if fit_radius:
+        # centre block of the inverse of [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]]: cofactors / det
+        c11 = a22 * a33 - a23 * a23
+        c12 = -(a12 * a33 - a23 * a13)
+        c22 = a11 * a33 - a13 * a13
+        det = a11 * c11 + a12 * c12 + a13 * (a12 * a23 - a22 * a13)
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[c11, c12], [c12, c22]]) / det
+    else:
+        det = a11 * a22 - a12 * a12
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[a22, -a12], [-a12, a11]]) / det
+        ray = center - sensor
+        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    if not np.all(np.isfinite(C)):
+        return cap * np.eye(2)
+    return _cap_std(C, params.radius_max_m)
+
+
+def concavity(points: np.ndarray, sensor: np.ndarray, k: int = 2) -> float:
+    """How far [m] the cluster's outline (points in scan order) dents away from the sensor: the largest distance of
+    a point p_i behind the chord from p_(i-k) to p_(i+k), counted positive away from the sensor (0 when no point
+    is). A convex object seen from outside (a post, a box, a person) bulges toward the sensor everywhere, so this is
+    noise only; where two objects meet in one cluster (a pedestrian beside a post, two posts a few cm apart) the
+    outline steps back into the gap between them. k = 2 skips one point, so that one noisy return does not make
+    a dent."""
+    n = len(points)
+    if n < 2 * k + 1:
+        return 0.0
+    a, b, c = points[: n - 2 * k], points[k: n - k], points[2 * k:]
+    ex, ey = c[:, 0] - a[:, 0], c[:, 1] - a[:, 1]
+    length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
+    side_b = ex * (b[:, 1] - a[:, 1]) - ey * (b[:, 0] - a[:, 0])
+    side_s = ex * (sensor[1] - a[:, 1]) - ey * (sensor[0] - a[:, 0])
+    return float(max(np.max(-np.sign(side_s) * side_b / length), 0.0))
 
 
 def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) -> np.ndarray:
-    """Points of one wall cluster (scan order) that represent it: the point nearest to the robot, then, walking
-    along the cluster in both directions, the first point past every multiple of ``spacing`` of path length."""
+    """Points of one cluster (scan order) that represent its surface: the point nearest to the robot, then, walking
+    along the cluster in both directions, the first point past every multiple of ``spacing`` of path length, and
+    the cluster's two end points (a wall's end at a door, a box's corners: between the nearest point and an end
+    closer than ``spacing`` no bin would start, and a 0.4 m box face seen square-on would be one point)."""
     n = len(points)
     if n <= 1:
         return points
@@ -294,8 +544,68 @@ def wall_candidates(points: np.ndarray, robot_xy: np.ndarray, spacing: float) ->
     keep[j] = True
     keep[j + 1:] = bins[j + 1:] != bins[j:-1]                         # forward: first point of each new bin
     keep[:j] = bins[:j] != bins[1:j + 1]                              # backward, likewise
+    keep[0] = keep[-1] = True
     order = np.flatnonzero(keep)
     return points[np.concatenate([[j], order[order != j]])]
+
+
+def wall_candidates_many(point_sets: list, robot_xy: np.ndarray, spacing: float) -> np.ndarray:
+    """:func:`wall_candidates` of many clusters at once (array operations over their concatenated points),
+    concatenated in the same order: cluster by cluster, each one's nearest point first."""
+    sets = [q for q in point_sets if len(q)]
+    if not sets:
+        return np.zeros((0, 2))
+    n = np.array([len(q) for q in sets])
+    m = len(sets)
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    ends = starts + n - 1
+    Q = np.concatenate(sets)
+    N = len(Q)
+    g = np.repeat(np.arange(m), n)
+    dx, dy = Q[:, 0] - robot_xy[0], Q[:, 1] - robot_xy[1]
+    d2 = dx * dx + dy * dy
+    dmin = np.minimum.reduceat(d2, starts)
+    ar = np.arange(N)
+    j = np.minimum.reduceat(np.where(d2 == dmin[g], ar, N), starts)          # first nearest point per cluster
+    step = np.zeros(N)
+    if N > 1:
+        e = np.diff(Q, axis=0)
+        step[1:] = np.sqrt(e[:, 0] ** 2 + e[:, 1] ** 2)
+    step[starts] = 0.0
+    cs = np.cumsum(step)
+    s_ = cs - cs[starts][g]
+    bins = np.floor(np.abs(s_ - s_[j][g]) / spacing)
+    jg = j[g]
+    keep = np.zeros(N, bool)
+    fwd = (ar > jg)
+    keep[fwd] = bins[fwd] != bins[ar[fwd] - 1]
+    bwd = (ar < jg)
+    keep[bwd] = bins[bwd] != bins[ar[bwd] + 1]
+    keep[j] = keep[starts] = keep[ends] = True
+    sel = np.flatnonzero(keep)
+    order = np.lexsort((sel, sel != jg[sel], g[sel]))
+    return Q[sel[order]]
+
+
+def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np.ndarray:
+    """(len(clusters),) bool: which clusters are compact objects: at least min_points points and an extent (largest
+    distance between two of their points, :func:`extent`) of at most compact_max_extent_m. The extent is bounded
+    by the largest distance d1 from the cluster's first point (d1 <= extent <= 2 d1), so only clusters with
+    limit / 2 < d1 <= limit need the pairwise distances."""
+    m = len(clusters)
+    if m == 0:
+        return np.zeros(0, bool)
+    limit = params.compact_max_extent_m
+    n = np.array([len(c.idx) for c in clusters])
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    P = sp.xy[np.concatenate([c.idx for c in clusters])]
+    first = P[starts][np.repeat(np.arange(m), n)]
+    d = np.sqrt((P[:, 0] - first[:, 0]) ** 2 + (P[:, 1] - first[:, 1]) ** 2)
+    e1 = np.maximum.reduceat(d, starts)
+    ok = (n >= params.min_points) & (e1 <= limit)
+    for k in np.flatnonzero(ok & (e1 > limit / 2) & (n <= 400)):
+        ok[k] = extent(P[starts[k]: starts[k] + n[k]], limit) <= limit
+    return ok
 
 
 def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: PerceptionParams) -> np.ndarray:

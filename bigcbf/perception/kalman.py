@@ -38,19 +38,25 @@ def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.nd
 H = np.hstack([np.eye(2), np.zeros((2, 2))])
 
 
-def innovation(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var: float) -> tuple[np.ndarray, np.ndarray]:
-    """Innovation y = z - H x and its covariance S = H P H^T + R, R = meas_var I. x (N,4), P (N,4,4), z (N,2)."""
-    return z - x[:, :2], P[:, :2, :2] + meas_var * np.eye(2)
+def measurement_matrix(meas_var) -> np.ndarray:
+    """R: a number r for r I, or covariances (N, 2, 2) as they are."""
+    return meas_var * np.eye(2) if np.ndim(meas_var) == 0 else np.asarray(meas_var, float)
 
 
-def kf_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var: float) -> tuple[np.ndarray, np.ndarray]:
-    """Measurement update with a position measurement z (N,2): K = P H^T S^-1, x' = x + K y,
-    P' = (I - K H) P (I - K H)^T + K R K^T (Joseph form, stays symmetric positive definite)."""
+def innovation(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var) -> tuple[np.ndarray, np.ndarray]:
+    """Innovation y = z - H x and its covariance S = H P H^T + R; R = meas_var I for a number, or meas_var itself
+    (N,2,2), one covariance per measurement. x (N,4), P (N,4,4), z (N,2)."""
+    return z - x[:, :2], P[:, :2, :2] + measurement_matrix(meas_var)
+
+
+def kf_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var) -> tuple[np.ndarray, np.ndarray]:
+    """Measurement update with a position measurement z (N,2) of covariance R (``innovation``): K = P H^T S^-1,
+    x' = x + K y, P' = (I - K H) P (I - K H)^T + K R K^T (Joseph form, stays symmetric positive definite)."""
     y, S = innovation(x, P, z, meas_var)
     K = P[:, :, :2] @ np.linalg.inv(S)                                   # P H^T = P[:, :, :2]
     x_new = x + np.einsum("nij,nj->ni", K, y)
     IKH = np.eye(4) - K @ H
-    R = meas_var * np.eye(2)
+    R = measurement_matrix(meas_var)
     P_new = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
 

@@ -1,26 +1,43 @@
-"""LiDAR perception: scan -> points in odom -> clusters -> circles (compact objects) and wall points (extended
-structure) -> tracks (CV Kalman filters, static/dynamic hysteresis) -> Obstacles.
+"""LiDAR perception: scan -> points in odom -> clusters -> circles (compact round objects, walkers) and wall points
+(every other surface) -> tracks (CV Kalman filters, static/dynamic hysteresis) -> Obstacles.
 
 Per scan, with the robot pose (odometry) at the scan's stamp:
 
 1. valid beams become points in odom (``geometry.scan_to_points``), so velocities are not fooled by the robot's
    own motion;
-2. scan-order clustering (``geometry.cluster_points``);
+2. scan-order clustering (``geometry.cluster_points``), then track-aided segmentation (``Perception._segment``):
+   the tracks are predicted to the scan's stamp, and a cluster that holds two known objects (points on the
+   predicted circles of two confirmed tracks, e.g. a walker passing a post, two walkers side by side) or a walker
+   inside an extended cluster (a walker along a wall) is split along them. Without it both tracks starved while the
+   objects were close: crowd_00001 (dev), two walkers side by side made one 0.76 m cluster for a second, both
+   tracks were deleted and a walker was re-acquired 0.46 m from the robot as a static object;
 3. a cluster longer than compact_max_extent_m is a WALL (walls, long or large obstacles). It is not forced into a
-   circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot
-   and points every wall_spacing_m along it. Returns that cannot be trusted as one whole object are wall points too,
-   since their apparent centre would slide as the robot or an occluder moves (phantom velocities): clusters with
-   fewer than min_points, and compact clusters that are not a clean arc (the circle model lost to the rectangle
-   model) and are either partly hidden by a nearer object or seen at a grazing angle (median point spacing above
-   grazing_spacing_factor beam spacings). A partly hidden arc is still a good measurement of its circle;
-4. other compact clusters give a circle (centre, radius) (``geometry.measure_compact``) fed to the tracker; a
-   circle the tracker can neither match nor start a track with (it lies inside a known object but its radius does
-   not match: two objects merged into one cluster) is represented by its wall points;
-5. the output is the confirmed tracks (at most max_tracks, nearest first; ids >= 0, r > 0, cov = KF position
-   covariance, static flag with hysteresis, v = 0 when static) CONCATENATED with the wall points (at most
-   wall_max_points, within wall_range_m of the robot, nearest first; ids -1, r 0, v 0, static, cov from the scan:
-   range noise along the beam and the beam's angular resolution across it, ``geometry.wall_point_covariance``),
-   one CBF constraint each.
+   circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot,
+   points every wall_spacing_m along it and its two ends. Returns that cannot be trusted as one whole object are
+   wall points too: clusters with fewer than min_points; compact clusters that are not a clean arc (the circle model
+   lost to the rectangle model) and are either partly hidden by a nearer object or seen at a grazing angle (median
+   point spacing above grazing_spacing_factor beam spacings), since their apparent centre would slide as the robot
+   or an occluder moves (phantom velocities); and compact clusters that no single model explains: the winning
+   model's RMS residual above fit_rms_ratio_max, or a dent in the outline above concavity_ratio_max, times the range
+   noise's std there (two objects in one cluster; ``geometry.concavity``). A partly hidden arc is still a good
+   measurement of its circle;
+4. the other compact clusters are measured (``geometry.measure_clusters``, the batched ``measure_compact``): a
+   centre, a radius, whether the circle model explained them outright (the object's shape evidence) and the centre's
+   covariance from the fit itself (``geometry.circle_fit_covariance`` / ``rectangle_covariance``: range noise and
+   beam spacing at its points; a far post seen by four beams scatters ten times more than a near one seen by
+   thirty, and a fixed covariance made the far ones' jitter look like motion). They update or start tracks
+   (``tracker.Tracker.step``); a circle the tracker can neither match nor start a track with (it lies inside a
+   known object but its radius does not match) is represented by its wall points;
+5. the output (``tracker.Tracker.report``) is a list of CIRCLES: the confirmed tracks that are dynamic or round, at
+   most max_tracks, nearest first (ids >= 0, r > 0, cov = the filter's position covariance, static flag with
+   hysteresis, v = 0 when static), CONCATENATED with the WALL POINTS (at most wall_max_points, within wall_range_m
+   of the robot, nearest first; ids -1, r 0, v 0, static, cov from the scan: range noise along the beam and the
+   beam's angular resolution across it, ``geometry.wall_point_covariance``), one CBF constraint each. The wall
+   points come from the walls and rejected clusters of this scan and from the SURFACES of the tracks not reported
+   as circles: a static track that is not round (a box, a wall's end, a bottleneck's jamb), the tracks beyond the
+   budget, and the tentative tracks measured in this scan (an object seen for the first time is an obstacle
+   before its track is confirmed). A track's surface is the cluster of its last measurement, so a static box
+   hidden for a moment keeps its points while its track coasts.
 
 Why wall points: the CBF adds one constraint per obstacle, and a circle around a wall would either swallow the
 corridor or miss the wall's ends. A wall point has radius 0, so the robot keeps D = r_R + d0 + margin from the wall
@@ -28,11 +45,21 @@ surface; between two points wall_spacing_m apart the clearance loses at most D -
 1.5 cm for D = 0.35 m and 0.2 m spacing). Nearest first with a cap keeps the QP small where it matters: around the
 robot, on every nearby wall (each wall cluster contributes its nearest point).
 
+Why a box is not a circle: the rectangle fit completes a box into a square of its long side (its depth is unseen),
+and the circle around that square reaches (sqrt 2 - 1) / 2 of the side beyond each face: 0.15 m for a 0.76 m deep
+bottleneck's jamb, whose circle (r ~ 0.53 m) closed a 1.1 m opening to 0.8 m for every method (doorway_00000 and
+doorway_00001, dev). Its surface points are exact.
+
+Why the budget is kept at eight circles (max_tracks, the paper's "at most eight tracked entities", Sec. V): beyond
+it, a track is not dropped but reported by its surface points (a post field of 14-19 posts lost the far posts
+from the output entirely before); the circles are what the CBF keeps one row each for (``control/cbf.py``).
+
 Limitations (documented choices): a scan is taken as instantaneous (no per-beam motion correction); wall points come
-from the current scan only (no map); an object closer than the breakpoint distance (~0.2-0.3 m at 2 m) to a wall or
-to another object merges with it into one cluster for those scans (its track coasts, the merged returns are wall
-points); a moving pedestrian is reported static (v = 0) until its speed has exceeded v_dynamic_mps for n_dynamic
-updates.
+from the current scan only (no map) or a track's last cluster; an object closer than the breakpoint distance
+(~0.2-0.3 m at 2 m) to a wall or to another object that is not yet tracked merges with it into one cluster for
+those scans (the merged returns are wall points); a moving pedestrian is reported static (v = 0) until its speed
+has exceeded v_dynamic_mps and dynamic_sigma standard deviations for n_dynamic updates (three updates for a
+walker measured well, i.e. near the robot).
 """
 from __future__ import annotations
 
@@ -43,8 +70,8 @@ import numpy as np
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (cluster_points, extent, measure_compact, scan_to_points, select_wall_points,
-                       wall_candidates, wall_point_covariance)
+from .geometry import (Cluster, cluster_points, compact_mask, measure_clusters, scan_to_points,
+                       select_wall_points, wall_candidates_many, wall_point_covariance)
 from .tracker import Tracker
 
 
@@ -88,6 +115,69 @@ class Perception:
         spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])        # (upper) median
         return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
 
+    def _segment(self, sp, clusters: list, is_compact: np.ndarray) -> tuple[list, np.ndarray]:
+        """Track-aided segmentation: a cluster that holds known objects (points on the predicted circles of
+        confirmed tracks, ``Tracker.surface_owner``) is split along them: a compact cluster on two or more tracks'
+        surfaces (a walker beside a post or another walker), and the walkers (dynamic tracks) in an extended
+        cluster (walkers side by side, a walker along a wall). Each such track's points (at least min_points)
+        become a cluster of their own, marked partly hidden (its arc is cut where the other object begins); the
+        rest stays one cluster. Returns the clusters and their compact flags (``geometry.compact_mask``)."""
+        pr = self.params
+        T = self.tracker
+        if len(clusters) == 0 or not np.any(T.confirmed):
+            return clusters, is_compact
+        owner = T.surface_owner(sp.xy)
+        owned = np.flatnonzero(owner >= 0)
+        if len(owned) == 0:
+            return clusters, is_compact
+        # only clusters with points on two tracks, or on a walker while extended, can need a split
+        label = np.empty(len(sp.xy), int)
+        for k, cl in enumerate(clusters):
+            label[cl.idx] = k
+        lo = np.full(len(clusters), np.iinfo(int).max)
+        hi = np.full(len(clusters), -1)
+        np.minimum.at(lo, label[owned], owner[owned])
+        np.maximum.at(hi, label[owned], owner[owned])
+        walker = np.zeros(len(clusters), bool)
+        dyn = owned[~T.static[owner[owned]]]
+        walker[label[dyn]] = True
+        check = np.flatnonzero((hi >= 0) & ((lo != hi) | (walker & ~is_compact)))
+        if len(check) == 0:
+            return clusters, is_compact
+        out, flags, new = [], [], []
+        split_set = set(check.tolist())
+        for k, cl in enumerate(clusters):
+            if k not in split_set:
+                out.append(cl)
+                flags.append(bool(is_compact[k]))
+                continue
+            own = owner[cl.idx]
+            ids, counts = np.unique(own[own >= 0], return_counts=True)
+            keep = counts >= 2                                      # a track with one point there: noise
+            ids, counts = ids[keep], counts[keep]
+            pick = (counts >= pr.min_points) & (~T.static[ids] if not is_compact[k] else len(ids) >= 2)
+            split = ids[pick]
+            if len(split) == 0 or (len(split) == 1 and counts[pick][0] == len(own)):
+                out.append(cl)
+                flags.append(bool(is_compact[k]))
+                continue
+            taken = np.zeros(len(own), bool)
+            for i in split:
+                part = own == i
+                taken |= part
+                out.append(Cluster(cl.idx[part], True))
+                flags.append(None)
+                new.append(len(out) - 1)
+            if np.any(~taken):
+                out.append(Cluster(cl.idx[~taken], cl.occluded))
+                flags.append(None)
+                new.append(len(out) - 1)
+        if new:
+            sub = compact_mask(sp, [out[i] for i in new], pr)
+            for i, c in zip(new, sub):
+                flags[i] = bool(c)
+        return out, np.array(flags, bool)
+
     def update(self, scan: LaserScan, pose: tuple[float, float, float]) -> Obstacles:
         """Process one scan taken at ``scan.stamp`` [s] with the robot at ``pose`` = (x [m], y [m], theta [rad]) in
         odom at that stamp; returns the obstacle estimates in odom (tracks, then wall points)."""
@@ -105,24 +195,33 @@ class Perception:
         robot = np.array([float(pose[0]), float(pose[1])])
 
         sp = scan_to_points(scan, pose, pr)
-        centers, radii, walls, compact = [], [], [], []
-        for cl in cluster_points(sp, pr):
+        self.tracker.predict(float(scan.stamp))
+        clusters = cluster_points(sp, pr)
+        clusters, is_compact = self._segment(sp, clusters, compact_mask(sp, clusters, pr))
+        walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
+        candidates = [cl for cl, c in zip(clusters, is_compact) if c]
+        centers, radii, covs, rounds, compact = [], [], [], [], []
+        measurements, dents = measure_clusters(sp, candidates, pr)
+        for cl, meas, dent in zip(candidates, measurements, dents):
             pts = sp.xy[cl.idx]
-            if len(cl.idx) < pr.min_points or extent(pts, pr.compact_max_extent_m) > pr.compact_max_extent_m:
-                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
-                continue
-            meas = measure_compact(pts, sp.sensor, pr, cl.occluded, sp.angle_increment)
-            if not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)):
-                walls.append(wall_candidates(pts, robot, pr.wall_spacing_m))
+            if ((not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)))
+                    or meas.rms > pr.fit_rms_ratio_max * meas.rms_expected
+                    or dent > pr.concavity_ratio_max * meas.rms_expected):
+                walls.append(pts)
                 continue
             centers.append(meas.center)
             radii.append(meas.radius)
+            covs.append(meas.cov)
+            rounds.append(meas.round)
             compact.append(pts)
-        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot)
-        walls += [wall_candidates(compact[k], robot, pr.wall_spacing_m) for k in rejected]
-        wall_pts = select_wall_points(np.concatenate(walls) if walls else np.zeros((0, 2)), robot, pr)
+        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot,
+                                     np.array(covs).reshape(-1, 2, 2), np.array(rounds, bool), compact)
+        walls += [compact[k] for k in rejected]
+        circles, surfaces = self.tracker.report(robot)
+        walls += surfaces
+        wall_pts = select_wall_points(wall_candidates_many(walls, robot, pr.wall_spacing_m), robot, pr)
         self.last_wall_points = wall_pts
         wall_cov = wall_point_covariance(wall_pts, sp.sensor, sp.angle_increment, pr)
-        out = self.tracker.obstacles(robot).concat(wall_obstacles(wall_pts, wall_cov))
+        out = circles.concat(wall_obstacles(wall_pts, wall_cov))
         self._last_ms = 1e3 * (time.perf_counter() - t0)
         return out

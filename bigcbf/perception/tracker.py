@@ -1,25 +1,34 @@
 """Multi-object tracker: gating, assignment, track birth / confirmation / coasting / deletion, one CV Kalman filter
-per track, static/dynamic hysteresis. Tracks are kept as arrays (a few dozen at most).
+per track, static/dynamic hysteresis, each track's shape (round or not) and last surface. Tracks are kept as arrays
+(a few dozen at most).
 
 Life of a track:
 * born TENTATIVE from a cluster no track claimed (unless its centre lies inside an existing track's circle: a
   split cluster of a known object), with velocity 0 and velocity std init_vel_sigma_mps;
 * CONFIRMED after confirm_hits measurements; a tentative track is deleted after tentative_max_misses misses;
 * classified static/dynamic (``classify``) once its velocity rests on more than classify_after_hits measurements
-  (default 1: from its second measurement on; a higher value suppresses phantom dynamic tracks, e.g. a 0.15 m bin
-  4.5 m away, seen by four beams of a 1-degree LiDAR with 2.7 cm range noise, jumped 11 cm between its first two
-  fits and was classified dynamic at its fourth scan, but delays a pedestrian who appears near the robot: see
-  PerceptionParams.classify_after_hits);
+  (default 1: from its second measurement on). A phantom velocity of a static object is kept out by the
+  measurement covariances and the significance test, not by waiting: each measurement comes with the covariance
+  of its own fit (``geometry.circle_fit_covariance``), so a 0.15 m bin 4.5 m away seen by four beams (its first
+  fits jumped 11 cm) has a centre std of ~8 cm along the line of sight and its velocity estimate a large std,
+  and dynamic_sigma = 2 asks for a speed twice that std. With the former fixed 5 cm std and a 1-sigma test, far
+  posts of the dev split's post fields were dynamic in up to 9 % of the scans of an episode (posts_00001); a
+  walker near the robot, measured to 1-2 cm, still turns dynamic at its fourth measurement;
 * a confirmed track with no measurement coasts at constant velocity with growing covariance for coast_s (a
   pedestrian hidden behind a wall or another pedestrian keeps its identity), then is deleted; while it coasts,
   its reported covariance is bounded by physics (:func:`coast_bound`);
-* at most max_candidates tracks are kept (the farthest are dropped); the output is the max_tracks confirmed tracks
-  nearest to the robot (distance to their surface, |p - p_robot| - r).
+* at most max_candidates tracks are kept (the farthest are dropped); :meth:`Tracker.report` gives the circles
+  (confirmed, dynamic or round, the max_tracks nearest by distance to their surface, |p - p_robot| - r) and the
+  surfaces of the others (static and not round, beyond the budget, tentative ones measured now).
+Shape: a track is round while the smoothed share (factor shape_smoothing) of its measurements that the circle
+model explained outright (``geometry.Measurement.round``) is at least 1/2; it starts with its first measurement's.
 Association: cost = Euclidean distance between the predicted centre and a cluster centre; a pair is allowed when
-its Mahalanobis distance squared (innovation covariance S = P_pos + R) is below gate_chi2 or its distance is below
-gate_min_m, never beyond gate_max_m, and only when the cluster's radius is within gate_radius_m of the track's (two
-objects merged into one cluster, e.g. a pedestrian passing a post, must not drag the post's track); the assignment
-minimising the total cost is scipy's linear_sum_assignment.
+its Mahalanobis distance squared (innovation covariance S = P_pos + R, R the measurement's fit covariance plus
+fit_model_sigma_m^2 I) is below gate_chi2 or its distance is below gate_min_m, never beyond gate_max_m, and only
+when the cluster's radius is within gate_radius_m of the track's (two objects merged into one cluster, e.g. a
+pedestrian passing a post, must not drag the post's track); the assignment minimising the total cost is scipy's
+linear_sum_assignment. Before that, the pipeline splits clusters that hold two known objects along the tracks'
+predicted circles (:meth:`Tracker.surface_owner`, ``pipeline.Perception._segment``).
 
 Two filters per track. The constant-velocity Kalman filter (``kalman``) estimates every track's velocity and drives
 the static/dynamic classification; dynamic tracks report its position and covariance. Static tracks report a
@@ -41,7 +50,7 @@ from .kalman import kf_predict, kf_update, mahalanobis2
 _INFEASIBLE = 1e9
 
 _FIELDS = ("x", "P", "xs", "Ps", "ids", "r", "hits", "misses", "confirmed", "static", "n_dyn", "n_stat", "last_hit",
-           "P_hit", "sv_hit")
+           "P_hit", "sv_hit", "roundness", "surface")
 
 
 def coast_bound(tau, static, speed, sigma_v0, params: PerceptionParams) -> np.ndarray:
@@ -96,6 +105,8 @@ class Tracker:
         self.n_dyn = np.zeros(0, int)
         self.n_stat = np.zeros(0, int)
         self.last_hit = np.zeros(0)
+        self.roundness = np.zeros(0)          # smoothed share of circle-model measurements (1 = round)
+        self.surface = np.empty(0, object)    # the points (k, 2) of the last measured cluster, odom [m]
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -104,19 +115,20 @@ class Tracker:
         for name in _FIELDS:
             setattr(self, name, getattr(self, name)[mask])
 
-    def _append(self, z: np.ndarray, r: np.ndarray, t: float) -> None:
+    def _append(self, z: np.ndarray, r: np.ndarray, R: np.ndarray, round_: np.ndarray, surface: np.ndarray,
+                t: float) -> None:
         m = len(z)
         pr = self.params
         x = np.hstack([z, np.zeros((m, 2))])
         P = np.zeros((m, 4, 4))
-        P[:, 0, 0] = P[:, 1, 1] = pr.meas_sigma_m ** 2
+        P[:, :2, :2] = R
         P[:, 2, 2] = P[:, 3, 3] = pr.init_vel_sigma_mps ** 2
-        R = pr.meas_sigma_m ** 2 * np.broadcast_to(np.eye(2), (m, 2, 2))
         new = dict(x=x, P=P, xs=np.asarray(z, float).reshape(m, 2).copy(), Ps=R.copy(), P_hit=R.copy(),
                    sv_hit=np.full(m, pr.init_vel_sigma_mps), ids=self.next_id + np.arange(m), r=np.asarray(r, float),
                    hits=np.ones(m, int),
                    misses=np.zeros(m, int), confirmed=np.full(m, pr.confirm_hits <= 1), static=np.ones(m, bool),
-                   n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t))
+                   n_dyn=np.zeros(m, int), n_stat=np.zeros(m, int), last_hit=np.full(m, t),
+                   roundness=np.asarray(round_, float), surface=surface)
         self.next_id += m
         for name in _FIELDS:
             setattr(self, name, np.concatenate([getattr(self, name), new[name]]))
@@ -128,16 +140,47 @@ class Tracker:
             self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)
         self.t = t
 
-    def associate(self, z: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,), gated
-        (module docstring)."""
+    def measurement_covariance(self, cov: np.ndarray | None, m: int) -> np.ndarray:
+        """R (m, 2, 2) [m^2] of m cluster centres: their fit covariance ``cov`` (``geometry.measure_compact``; none
+        given: 0) plus fit_model_sigma_m^2 I (what the fit's own covariance leaves out: the object's shape is not
+        exactly the model's, the scan is not instantaneous)."""
+        floor = self.params.fit_model_sigma_m ** 2 * np.eye(2)
+        if cov is None:
+            return np.broadcast_to(floor, (m, 2, 2)).copy()
+        return np.asarray(cov, float).reshape(m, 2, 2) + floor
+
+    def surface_owner(self, points: np.ndarray) -> np.ndarray:
+        """(n,) int: for each point (n, 2), the index (into the track arrays) of the confirmed track on whose
+        predicted circle it lies (|p - c| - r within merge_tol_m plus twice the track's position std; the nearest
+        such circle), or -1. Call after :meth:`predict`: the pipeline splits clusters that hold known objects along
+        this (track-aided segmentation)."""
+        out = np.full(len(points), -1)
+        conf = np.flatnonzero(self.confirmed)
+        if len(conf) == 0 or len(points) == 0:
+            return out
+        c, r = self.x[conf, :2], self.r[conf]
+        lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
+        tol = self.params.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
+        d = np.abs(np.sqrt((points[:, None, 0] - c[None, :, 0]) ** 2 + (points[:, None, 1] - c[None, :, 1]) ** 2)
+                   - r[None, :])
+        best = np.argmin(d, axis=1)
+        ok = d[np.arange(len(points)), best] <= tol[best]
+        out[ok] = conf[best[ok]]
+        return out
+
+    def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,) and
+        measurement covariances R (M,2,2) (default: ``measurement_covariance(None, M)``), gated (module
+        docstring)."""
         n, m = len(self), len(z)
         if n == 0 or m == 0:
             return np.zeros(0, int), np.zeros(0, int)
         pr = self.params
+        if R is None:
+            R = self.measurement_covariance(None, m)
         y = z[None, :, :] - self.x[:, None, :2]                              # (n, m, 2)
         dist = np.linalg.norm(y, axis=2)
-        S = self.P[:, None, :2, :2] + pr.meas_sigma_m ** 2 * np.eye(2)
+        S = self.P[:, None, :2, :2] + R[None, :, :, :]
         d2 = mahalanobis2(y, S)
         ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
         ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
@@ -146,22 +189,35 @@ class Tracker:
         good = ok[rows, cols]
         return rows[good], cols[good]
 
-    def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray) -> np.ndarray:
+    def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray, cov: np.ndarray | None = None,
+             round_: np.ndarray | None = None, surface: list | None = None) -> np.ndarray:
         """One scan: predict to t, associate cluster centres z (M,2) with radii (M,), update, birth, delete.
 
-        Returns the indices of the measurements that neither updated a track nor started one (a cluster inside a
-        known object's circle whose radius does not match it, e.g. two objects merged into one cluster)."""
+        ``cov`` (M,2,2): the centres' fit covariances (``measurement_covariance``); ``round_`` (M,) bool: whether
+        the circle model explained the cluster (default all); ``surface``: the cluster's points (k, 2) per
+        measurement, kept with the track that takes it (``report``). Returns the indices of the measurements that
+        neither updated a track nor started one (a cluster inside a known object's circle whose radius does not
+        match it, e.g. two objects merged into one cluster)."""
         pr = self.params
         z = np.asarray(z, float).reshape(-1, 2)
+        m = len(z)
         radii = np.asarray(radii, float).reshape(-1)
+        R = self.measurement_covariance(cov, m)
+        rnd = np.ones(m) if round_ is None else np.asarray(round_, float).reshape(m)
+        surf = np.empty(m, object)
+        for k in range(m):
+            surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
         self.predict(t)
-        rows, cols = self.associate(z, radii)
+        rows, cols = self.associate(z, radii, R)
         if len(rows):
-            x, P = kf_update(self.x[rows], self.P[rows], z[cols], pr.meas_sigma_m ** 2)
+            x, P = kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
             self.x[rows], self.P[rows] = x, P
-            self._update_static_filter(rows, z[cols])
+            self._update_static_filter(rows, z[cols], R[cols])
             a = pr.radius_smoothing
             self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
+            b = pr.shape_smoothing
+            self.roundness[rows] = (1 - b) * self.roundness[rows] + b * rnd[cols]
+            self.surface[rows] = surf[cols]
             self.hits[rows] += 1
             self.misses[rows] = 0
             self.last_hit[rows] = t
@@ -190,20 +246,20 @@ class Tracker:
         rejected = np.zeros(len(z), bool)
         if free.any() and len(self):
             d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
-            rejected = free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
+            rejected |= free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
             free &= ~rejected
         if free.any():
-            self._append(z[free], radii[free], t)
+            self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
         if len(self) > pr.max_candidates:
             keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
             self._keep(np.sort(keep))
         return np.flatnonzero(rejected)
 
-    def _update_static_filter(self, rows: np.ndarray, z: np.ndarray) -> None:
-        """The constant-position filter's update with measurements z (module docstring), then its consistency check
-        against the CV filter (restart from it when they disagree beyond gate_chi2)."""
+    def _update_static_filter(self, rows: np.ndarray, z: np.ndarray, R: np.ndarray) -> None:
+        """The constant-position filter's update with measurements z (K,2) of covariances R (K,2,2) (module
+        docstring), then its consistency check against the CV filter (restart from it when they disagree beyond
+        gate_chi2)."""
         pr = self.params
-        R = pr.meas_sigma_m ** 2 * np.eye(2)
         Ps = self.Ps[rows]
         K = Ps @ np.linalg.inv(Ps + R)
         xs = self.xs[rows] + np.einsum("nij,nj->ni", K, z - self.xs[rows])
@@ -234,14 +290,43 @@ class Tracker:
     def surface_distance(self, robot_xy: np.ndarray) -> np.ndarray:
         return np.linalg.norm(self.x[:, :2] - robot_xy, axis=1) - self.r
 
-    def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
-        """The confirmed tracks, at most max_tracks, nearest first (surface distance). Static tracks have v = 0 and
-        the constant-position filter's position and covariance; coasting covariances are bounded (``reported``)."""
-        idx = np.flatnonzero(self.confirmed)
-        if len(idx) == 0:
-            return Obstacles.empty()
-        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")][: self.params.max_tracks]
+    def is_round(self) -> np.ndarray:
+        """Whether each track's object is round: most of its recent clusters were explained by the circle model
+        (smoothed share of circle-model measurements, factor shape_smoothing, at least 1/2)."""
+        return self.roundness >= 0.5
+
+    def report(self, robot_xy: np.ndarray) -> tuple[Obstacles, list]:
+        """What the tracks tell the stack: (circles, surfaces).
+
+        Circles: the confirmed tracks that are dynamic or round, at most max_tracks, nearest first (surface
+        distance). Static tracks have v = 0 and the constant-position filter's position and covariance; coasting
+        covariances are bounded (``reported``).
+
+        Surfaces: the points (k, 2) of the last measured cluster of every other track, which the pipeline turns
+        into wall points: a static object that is not round (a box, a wall end, a corner: its circle would cover
+        free space around it) and the confirmed tracks beyond the budget (those measured now when dynamic, since a
+        walker's old points are stale), and the tentative tracks measured now (an object seen for the first time
+        is an obstacle before its track is confirmed)."""
+        pr = self.params
+        measured = self.last_hit >= (self.t if self.t is not None else 0.0) - 1e-9
+        circle = self.confirmed & (~self.static | self.is_round())
+        idx = np.flatnonzero(circle)
+        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")]
+        order, beyond = order[: pr.max_tracks], order[pr.max_tracks:]
+        as_points = np.zeros(len(self), bool)
+        as_points[beyond] = True
+        as_points |= self.confirmed & ~circle
+        as_points &= self.static | measured
+        as_points |= ~self.confirmed & measured
+        surfaces = [self.surface[k] for k in np.flatnonzero(as_points) if len(self.surface[k])]
+        if len(order) == 0:
+            return Obstacles.empty(), surfaces
         v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
         p, cov = self.reported(order)
-        return Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy())
+        return (Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy()),
+                surfaces)
+
+    def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
+        """The circles of :meth:`report`."""
+        return self.report(robot_xy)[0]
 

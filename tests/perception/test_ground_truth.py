@@ -37,3 +37,18 @@ def test_ground_truth_obstacles():
     w = obs.subset(obs.ids < 0)
     assert len(w) == 5 and w.p[0] == pytest.approx([0.0, 1.0])  # nearest wall point first
     assert np.all(w.r == 0) and np.all(w.static)
+
+
+def test_static_circles_beyond_the_budget_are_wall_points_on_their_near_half():
+    p = PerceptionParams(max_tracks=1, wall_max_points=24, wall_spacing_m=0.2)
+    obs = ground_truth_obstacles(robot_xy=(0.0, 0.0), centers=[(1.0, 0.0), (0.0, 2.0), (0.0, -2.5)],
+                                 velocities=[(0, 0), (0, 0), (1.0, 0)], radii=[0.2, 0.3, 0.25], params=p)
+    tr = obs.subset(obs.ids >= 0)
+    assert tr.ids.tolist() == [0]
+    w = obs.subset(obs.ids < 0)
+    # the static post at (0, 2), r 0.3: its nearest point (0, 1.7) and points every 0.2 m of arc over its near half
+    # (k = floor(0.5 pi 0.3 / 0.2) = 2 each side: 5 points); the walker beyond the budget is not turned into points
+    assert len(w) == 5
+    assert w.p[0] == pytest.approx([0.0, 1.7])
+    assert np.allclose(np.linalg.norm(w.p - [0.0, 2.0], axis=1), 0.3)
+    assert np.all(w.p[:, 1] <= 2.0 + 1e-12)

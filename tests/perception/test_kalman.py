@@ -63,3 +63,17 @@ def test_batched_update_matches_single():
 def test_mahalanobis_hand_value():
     # y = (1, 2), S = [[2, .5], [.5, 1]]: S^-1 = [[1, -.5], [-.5, 2]] / 1.75, y^T S^-1 y = (1 - 2 + 8) / 1.75 = 4
     assert mahalanobis2(np.array([1.0, 2.0]), np.array([[2.0, 0.5], [0.5, 1.0]])) == pytest.approx(4.0)
+
+
+def test_update_with_one_covariance_per_measurement():
+    """R may be a covariance per measurement (N, 2, 2): R = r I equals the scalar form, and a diagonal R =
+    diag(a, b) gives each axis its own gain, by hand K_p = P_pp / (P_pp + a) on x and P_pp / (P_pp + b) on y."""
+    P = np.diag([0.02, 0.02, 1.0, 1.0])[None]
+    x = np.zeros((1, 4))
+    z = np.array([[0.1, 0.1]])
+    xs, Ps = kf_update(x, P, z, 0.0025)
+    xm, Pm = kf_update(x, P, z, 0.0025 * np.eye(2)[None])
+    assert np.array_equal(xs, xm) and np.allclose(Ps, Pm, rtol=0, atol=1e-15)
+    xa, Pa = kf_update(x, P, z, np.diag([0.0025, 0.02])[None])
+    assert xa[0, 0] == pytest.approx(0.1 * 0.02 / 0.0225) and xa[0, 1] == pytest.approx(0.1 * 0.02 / 0.04)
+    assert Pa[0, 0, 0] == pytest.approx(0.02 * 0.0025 / 0.0225) and Pa[0, 1, 1] == pytest.approx(0.02 * 0.02 / 0.04)

@@ -96,11 +96,13 @@ def test_cap_covariance_by_hand():
 
 def test_static_track_covariance_is_the_constant_position_filters():
     """A post measured at 10 Hz: the reported covariance converges to the constant-position filter's steady state,
-    P = (-a + sqrt(a^2 + 4 a R)) / 2 with a = q dt = 1e-4 m^2, R = 0.05^2 (P^2 + a P - a R = 0): 4.525e-4 m^2."""
+    P = (-a + sqrt(a^2 + 4 a R)) / 2 with a = q dt = 1e-4 m^2, R = 0.05^2 (P^2 + a P - a R = 0): 4.525e-4 m^2.
+    R is the fit covariance handed to step() plus fit_model_sigma_m^2."""
     tr = _tracker(confirm_hits=1)
     rng = np.random.default_rng(0)
+    cov = (0.05 ** 2 - PerceptionParams().fit_model_sigma_m ** 2) * np.eye(2)[None]
     for k in range(60):
-        tr.step(0.1 * k, np.array([[2.0, 1.0]]) + rng.normal(0, 0.05, (1, 2)), np.array([0.2]), ORIGIN)
+        tr.step(0.1 * k, np.array([[2.0, 1.0]]) + rng.normal(0, 0.05, (1, 2)), np.array([0.2]), ORIGIN, cov)
     obs = tr.obstacles(ORIGIN)
     a, R = 1e-3 * 0.1, 0.05 ** 2
     steady = (-a + np.sqrt(a * a + 4 * a * R)) / 2
@@ -149,17 +151,103 @@ def test_static_track_that_starts_moving_follows_it():
 
 
 def test_young_track_is_not_classified_on_its_first_noisy_centres():
-    """A static bin whose first fitted centre is 11 cm off (few beams, range noise): the velocity of its first
-    updates is that jump, not motion; with classify_after_hits = 3 the classification waits until the velocity
-    rests on more than 3 measurements (from the second measurement on, it is classified dynamic at its fourth)."""
-    old = _tracker(confirm_hits=3, classify_after_hits=1)
-    for k, z in enumerate(([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])):
+    """A static bin 4.5 m away whose first fitted centres jump 11 cm (few beams, range noise): with the fit's own
+    covariance (about 8 cm std along the line of sight for four beams there; ``geometry.circle_fit_covariance``)
+    and a speed that must exceed dynamic_sigma = 2 standard deviations, the jump is not evidence of motion. With
+    the former fixed 5 cm measurement std and a 1-sigma test it was classified dynamic at its fourth update."""
+    zs = ([4.36, -0.905], [4.47, -0.945], [4.53, -0.945], [4.53, -0.945])
+    ray = np.array([4.45, -0.93]) / np.linalg.norm([4.45, -0.93])
+    cov = 0.08 ** 2 * np.outer(ray, ray) + 0.01 ** 2 * np.eye(2)
+    old = _tracker(confirm_hits=3, classify_after_hits=1, dynamic_sigma=1.0, fit_model_sigma_m=0.05)
+    for k, z in enumerate(zs):
         old.step(0.1 * k, np.array([z]), np.array([0.15]), ORIGIN)
     assert not old.static[0]
-    tr = _tracker(confirm_hits=3, classify_after_hits=3)
+    tr = _tracker(confirm_hits=3)
     rng = np.random.default_rng(1)
-    tr.step(0.0, np.array([[4.36, -0.905]]), np.array([0.15]), ORIGIN)
-    tr.step(0.1, np.array([[4.47, -0.945]]), np.array([0.15]), ORIGIN)
-    for k in range(2, 20):
-        tr.step(0.1 * k, np.array([[4.53, -0.945]]) + rng.normal(0, 0.01, (1, 2)), np.array([0.15]), ORIGIN)
+    for k in range(20):
+        z = np.array([zs[min(k, 3)]]) + (rng.normal(0, 0.01, (1, 2)) if k >= 4 else 0.0)
+        tr.step(0.1 * k, z, np.array([0.15]), ORIGIN, cov[None])
         assert tr.static[0], f"classified dynamic at update {k + 1}"
+
+
+def test_walker_near_the_robot_is_classified_within_three_updates():
+    """The other side of the significance test: a walker 1.5 m away at 1 m/s, measured well (2 cm std), is
+    dynamic at its fourth measurement (the earliest n_dynamic = 3 allows) and reported with its velocity."""
+    tr = _tracker(confirm_hits=3)
+    cov = np.array([0.02 ** 2 * np.eye(2)])
+    for k in range(4):
+        tr.step(0.1 * k, np.array([[1.5, -1.0 + 0.1 * k]]), np.array([0.25]), ORIGIN, cov)
+    obs = tr.obstacles(ORIGIN)
+    assert not obs.static[0] and np.linalg.norm(obs.v[0] - [0.0, 1.0]) < 0.35
+
+
+def test_surface_owner_by_hand():
+    """A point belongs to the confirmed track on whose predicted circle it lies: ||p - c| - r| <= merge_tol_m + 2
+    sigma_max (sigma_max: the largest position std of the track), the nearest such circle; tentative tracks own
+    nothing."""
+    tr = _tracker(confirm_hits=1, merge_tol_m=0.05)
+    tr.step(0.0, np.array([[2.0, 0.0], [2.0, 1.0], [5.0, 0.0]]), np.array([0.2, 0.3, 0.2]), ORIGIN)
+    tr.P[0, :2, :2] = np.diag([0.02 ** 2, 0.01 ** 2])          # tolerance 0.05 + 2 * 0.02 = 0.09 m
+    tr.P[1, :2, :2] = np.diag([0.01 ** 2, 0.01 ** 2])          # tolerance 0.07 m
+    tr.confirmed[2] = False                                     # tentative: owns nothing
+    pts = np.array([[1.75, 0.0],     # 0.25 from (2, 0): 0.05 off circle 0 -> 0
+                    [1.72, 0.0],     # 0.08 off circle 0 (tolerance 0.09 m) -> 0
+                    [1.70, 0.0],     # 0.10 off circle 0 -> none (tolerance 0.09 m)
+                    [2.0, 0.64],     # 0.36 from (2, 1): 0.06 off circle 1 (0.44 off circle 0) -> 1
+                    [2.0, 0.5],      # 0.3 off circle 0, 0.2 off circle 1 -> none
+                    [2.0, 0.28],     # 0.08 off circle 0 (tol 0.09), 0.42 off circle 1 -> 0
+                    [4.8, 0.0]])     # on the tentative track's circle -> none
+    assert tr.surface_owner(pts).tolist() == [0, 0, -1, 1, -1, 0, -1]
+    # the nearest circle wins where both tolerances hold: circles of 0.2 m at (0, 0) and (0, 0.5) (gap 0.1 m)
+    tr2 = _tracker(confirm_hits=1, merge_tol_m=0.1)
+    tr2.step(0.0, np.array([[0.0, 0.0], [0.0, 0.5]]), np.array([0.2, 0.2]), ORIGIN)
+    tr2.P[:, :2, :2] = 0.0
+    # (0, 0.24): 0.04 off circle 0, 0.06 off circle 1 -> 0; (0, 0.27): 0.07 off 0, 0.03 off 1 -> 1
+    assert tr2.surface_owner(np.array([[0.0, 0.24], [0.0, 0.27]])).tolist() == [0, 1]
+    assert tr2.surface_owner(np.zeros((0, 2))).tolist() == []
+
+
+def test_roundness_smoothing_by_hand():
+    """A track is round while the smoothed share of circle-model measurements is >= 1/2: with shape_smoothing
+    0.3 and a round first measurement, two non-round ones give 1 -> 0.7 -> 0.49 (not round), two round ones then
+    0.49 * 0.7 + 0.3 = 0.643 (round again), and a track born non-round starts at 0."""
+    tr = _tracker(confirm_hits=1, shape_smoothing=0.3)
+    z, r = np.array([[2.0, 0.0], [0.0, 3.0]]), np.array([0.2, 0.2])
+    tr.step(0.0, z, r, ORIGIN, round_=np.array([True, False]))
+    assert tr.roundness.tolist() == [1.0, 0.0] and tr.is_round().tolist() == [True, False]
+    expect = [0.7, 0.49, 0.643]
+    for k, rnd in enumerate((False, False, True)):
+        tr.step(0.1 * (k + 1), z, r, ORIGIN, round_=np.array([rnd, False]))
+        assert tr.roundness[0] == pytest.approx(expect[k])
+        assert tr.is_round()[0] == (expect[k] >= 0.5)
+    assert tr.roundness[1] == 0.0
+
+
+def test_report_budget_shape_and_tentative_surfaces():
+    """Tracker.report: the circles are the confirmed tracks that are dynamic or round, the max_tracks nearest
+    (surface distance); the static ones beyond the budget, the static non-round ones and the tentative ones measured
+    in this scan come back as their last clusters' points; nothing is lost."""
+    tr = _tracker(confirm_hits=1, max_tracks=3)
+    # five round posts at 1..5 m (r 0.1), a non-round box at 1.5 m; each cluster's "surface" marks its track
+    z = np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0], [5.0, 0.0], [0.0, 1.5]])
+    r = np.full(6, 0.1)
+    surf = [np.array([[k, 0.0]]) for k in range(6)]
+    tr.step(0.0, z, r, ORIGIN, round_=np.array([1, 1, 1, 1, 1, 0], bool), surface=surf)
+    circles, surfaces = tr.report(ORIGIN)
+    assert circles.p.tolist() == [[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]             # nearest three round ones
+    assert sorted(s[0, 0] for s in surfaces) == [3.0, 4.0, 5.0]                   # beyond the budget + the box
+    # a tentative track measured now is reported by its points; once it misses a scan, no longer
+    tr2 = _tracker(confirm_hits=3)
+    tr2.step(0.0, np.array([[2.0, 0.0]]), np.array([0.2]), ORIGIN, surface=[np.array([[1.8, 0.0], [1.9, 0.1]])])
+    circles, surfaces = tr2.report(ORIGIN)
+    assert len(circles) == 0 and len(surfaces) == 1 and surfaces[0].shape == (2, 2)
+    tr2.step(0.1, np.zeros((0, 2)), np.zeros(0), ORIGIN)
+    assert len(tr2) == 1 and tr2.report(ORIGIN)[1] == []
+    # a dynamic track beyond the budget: its points only while measured (a walker's old points are stale)
+    tr3 = _tracker(confirm_hits=1, max_tracks=1)
+    tr3.step(0.0, np.array([[1.0, 0.0], [3.0, 0.0]]), np.array([0.2, 0.2]), ORIGIN,
+             surface=[np.array([[0.8, 0.0]]), np.array([[2.8, 0.0]])])
+    tr3.static[1] = False
+    assert [s[0, 0] for s in tr3.report(ORIGIN)[1]] == [2.8]
+    tr3.step(0.1, np.array([[1.0, 0.0]]), np.array([0.2]), ORIGIN, surface=[np.array([[0.8, 0.0]])])
+    assert len(tr3) == 2 and tr3.report(ORIGIN)[1] == []
