@@ -111,14 +111,14 @@ class Calibration:
         acceleration ramp; their sum is what the log pins down.)"""
         if self.model is None:
             return np.full(3, np.nan)
-        return self.model.dynamic.latency_s + self.model.dynamic.lag_s * math.log(2)
+        return self.model.dynamic.latency_s + self.model.dynamic.axis_lags_s * math.log(2)
 
     @property
     def latency_ci_s(self) -> np.ndarray:
         """(3, 2): the 90 % bootstrap interval of :attr:`latency_s` [s]."""
         if self.model is None:
             return np.full((3, 2), np.nan)
-        return self.model.dynamic.latency_ci_s + self.model.dynamic.lag_s * math.log(2)
+        return self.model.dynamic.latency_ci_s + self.model.dynamic.axis_lags_s[:, None] * math.log(2)
 
     def tau95_parts(self) -> Tau95Parts:
         d = self.delay
@@ -170,18 +170,20 @@ class Calibration:
                 "wheel_yaw_lever_identified": bool(st.lever_identified),
                 "rim_demand_max_mps": st.demand_max, "saturated_settled_samples": int(st.n_saturated),
                 "wheel_accel_max_mps2": dyn.accel_max, "accel_floor_mps2": dyn.accel_floor,
-                "lag_s": dyn.lag_s, "linear_fit_across_limit": {"A": st.A_linear.tolist(), "d": st.d_linear.tolist()}}
+                "lag_s": dyn.lag_s, "lag_axes_s": dyn.axis_lags_s.tolist(), "linear_fit_across_limit": {"A": st.A_linear.tolist(), "d": st.d_linear.tolist()}}
 
     def to_json(self) -> dict:
         d = self.delay
         lat = self.latency_s
         ci = self.latency_ci_s
         dead = self.model.dynamic.latency_s if self.model is not None else np.full(3, np.nan)
+        lags = self.model.dynamic.axis_lags_s if self.model is not None else np.full(3, np.nan)
         return jsonable({
             "log": self.log, "topics": self.topics, "duration_s": self.duration_s,
             "tau95_s": d.tau95_s, "tau95_parts": to_dict(self.tau95_parts()),
             "tau95_axes": [AXES[j] for j in d.tau95_axes],
-            "latency_s": {AXES[j]: {"latency": float(lat[j]), "ci90": ci[j].tolist(), "dead_time": float(dead[j])}
+            "latency_s": {AXES[j]: {"latency": float(lat[j]), "ci90": ci[j].tolist(), "dead_time": float(dead[j]),
+                                    "lag": float(lags[j])}
                           for j in range(3) if np.isfinite(lat[j])},
             "lag_s": self.model.dynamic.lag_s if self.model is not None else None,
             "delay": {"xcorr_s": d.xcorr_s, "actuation_median_s": d.actuation_median_s,
@@ -486,8 +488,8 @@ def summary_lines(cal: Calibration) -> list[str]:
         lat, ci = cal.latency_s, cal.latency_ci_s
         lines.append("latency        command to wheel (90 % interval): " + ", ".join(
             f"{AXES[j]} {lat[j]:.3f} s [{ci[j, 0]:.3f}, {ci[j, 1]:.3f}]" for j in ident)
-            + f"  (dead time {', '.join(f'{dyn.latency_s[j]:.3f}' for j in ident)} s, then a {dyn.lag_s * 1e3:.0f} ms "
-            f"lag: + {dyn.lag_s * math.log(2) * 1e3:.0f} ms to half a step)")
+            + f"  (dead time {', '.join(f'{dyn.latency_s[j]:.3f}' for j in ident)} s, then a lag of "
+            f"{', '.join(f'{dyn.axis_lags_s[j] * 1e3:.0f}' for j in ident)} ms: + T ln 2 to half a step)")
     lines.append("delays         cross-correlation (90 % interval): " + ", ".join(
         f"{AXES[j]} {a.delay_s:.3f} s [{a.ci_s[0]:.3f}, {a.ci_s[1]:.3f}]" + (" NEAR TIE" if a.tie else "")
         for j, a in d.axes.items()) + f"; all axes {d.xcorr_s:.3f} s")

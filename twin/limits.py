@@ -30,11 +30,17 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
 2. dynamic part, on every sample of the calibration blocks: the model simulated on a 10 ms grid (the commands
    box-averaged over each step and the prediction interpolated to the odometry times, so that the fit moves
    smoothly with L) for a batch of candidates at once: a common dead time L and lag T without acceleration limit;
-   then a_max (geometric grid, and none) with L and T around that; then finer; then L per axis. An acceleration
-   limit is reported when it lowers the error by ``accel_gain`` against none. The yaw lever is then chosen among
+   then a_max (geometric grid, and none) with L and T around that; then finer; then L and T per axis (each axis
+   by its own error, the others held at the common values). The candidates' error for the common parts is the
+   geometric mean over the axes of each axis's summed squared error (the maximum-likelihood choice when each
+   axis has its own noise variance, :func:`_best`): a plain sum let the noisiest axis choose them for all (on
+   the simulated X3 the yaw rate's error, rocked by the rollers, was 12 times the others' and chose a 50 ms lag
+   with a 45 ms dead time for vx, whose own best is 85 ms and 13 ms). An acceleration limit is reported when it
+   lowers that error by ``accel_gain`` against none. The yaw lever is then chosen among
    those the static part leaves plausible (within 25 noise variances of its best), by the transients: how fast a
-   combined step ramps depends on it. The per-axis dead times get a 5-95 %
-   interval by bootstrap over the calibration blocks (the error of each candidate summed per block).
+   combined step ramps depends on it. Each axis's delay to half a step (L + T ln 2: dead time and lag trade off,
+   their sum is what a log pins down) gets a 5-95 % interval by bootstrap over the calibration blocks (the error
+   of each candidate summed per block).
 
 The dead time L is the command-to-wheel latency (what the robot profile's latency_s is in the simulator); T and the
 acceleration limit are the response after it.
@@ -270,7 +276,7 @@ class _Integral:
 @dataclass
 class Candidates:
     L: np.ndarray       # (C, 3) dead times per input axis [s]
-    T: np.ndarray       # (C,) lags [s]
+    T: np.ndarray       # (C,) lags, or (C, 3) one per axis [s]
     a: np.ndarray       # (C,) acceleration limits [m/s^2 of rim] (inf: none)
     k: np.ndarray | None = None      # (C,) yaw levers (None: the static fit's) [m]
     v_max: np.ndarray | None = None  # (C,) rim-speed limits that go with them [m/s]
@@ -331,7 +337,8 @@ class DynamicProblem:
             uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
             table = np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T    # (N, U)
             cols.append((np.ascontiguousarray(table), inv))
-        alpha = np.where(cand.T > 0, 1.0 - np.exp(-self.h / np.maximum(cand.T, 1e-12)), 1.0)[:, None]
+        T = cand.T if cand.T.ndim == 2 else cand.T[:, None]
+        alpha = np.where(T > 0, 1.0 - np.exp(-self.h / np.maximum(T, 1e-12)), 1.0)
         room = (cand.a * self.h)[:, None]
         v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
         x = np.tile(v0, (C, 1))
@@ -390,23 +397,35 @@ class DynamicProblem:
 class DynamicFit:
     """The dynamic part (step 2 of the module docstring)."""
     latency_s: np.ndarray               # (3,) dead time per axis [s] (nan: not identified)
-    latency_ci_s: np.ndarray            # (3, 2) bootstrap 5-95 % [s]
-    lag_s: float                        # first-order lag T [s]
+    latency_ci_s: np.ndarray            # (3, 2) bootstrap 5-95 % of the dead time at the axis's lag [s]
+    lag_s: float                        # the common first-order lag T (stages 1-3) [s]
     accel_max: float | None             # rim acceleration limit [m/s^2] (None: none seen)
     accel_floor: float                  # without one, the response is at least this fast [m/s^2]
     cost: float
     cost_no_accel: float
     notes: list[str] = field(default_factory=list)
     lever_m: float | None = None        # the yaw lever the transients chose among the plausible static ones
+    lags_s: np.ndarray | None = None    # (3,) the first-order lag per axis (stage 4; None: lag_s on every axis) [s]
+
+    @property
+    def axis_lags_s(self) -> np.ndarray:
+        """(3,) the lag of each axis [s]."""
+        return np.full(3, self.lag_s) if self.lags_s is None else np.asarray(self.lags_s, float)
 
     def candidate(self) -> Candidates:
         L = np.where(np.isfinite(self.latency_s), self.latency_s, np.nanmax(self.latency_s))
-        return Candidates(L[None, :], np.array([self.lag_s]),
+        return Candidates(L[None, :], self.axis_lags_s[None, :],
                           np.array([np.inf if self.accel_max is None else self.accel_max]))
 
 
 def _best(err: np.ndarray, axes: np.ndarray) -> tuple[int, np.ndarray]:
-    tot = err[:, :, axes].sum(axis=(1, 2))
+    """The candidate that best explains every identified axis, and each candidate's error: the geometric mean over
+    the axes of their summed squared errors. Minimising it is the Gaussian maximum-likelihood fit with an unknown
+    noise variance per axis (sum_j n log SSE_j, the variances concentrated out), so an axis whose measurement is
+    noisier than the others (a Mecanum base's yaw rate: its rollers rock the body) does not choose the common lag
+    and acceleration limit for all; it is also free of the axes' units and scales."""
+    sse = err[:, :, axes].sum(axis=1)                                    # (C, identified axes)
+    tot = np.exp(np.mean(np.log(np.maximum(sse, 1e-300)), axis=1))
     return int(np.argmin(tot)), tot
 
 
@@ -459,29 +478,41 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
         best_cost = float(tot3b[i])
         prob = DynamicProblem(prob.t_cmd, prob.u_cmd, prob.ts, prob.vs, prob.use, prob.block, prob.axes,
                               prob.static.at_lever(lever), prob.h, prob.avg_s)
-    # 4. dead time per axis, bootstrap over blocks
+    # 4. dead time and lag per axis (the others at the common ones), bootstrap over blocks: the axes of one base
+    # need not respond alike (a Mecanum base's yaw, turned by its rollers' friction, follows more slowly than its
+    # translation), and a lag shared with a slower axis would call that axis settled while it still moves
     rng = np.random.default_rng(seed)
     offs = np.arange(-0.05, 0.0501, 0.005)
-    rows, which = [], []
+    lag_grid = np.unique(np.r_[lags, T0])
+    rows, lag_rows, which = [], [], []
     for j in np.flatnonzero(axes):
         for o in offs:
-            L = np.full(3, L0)
-            L[j] = max(L0 + o, 0.0)
-            rows.append(L)
-            which.append(j)
+            for T in lag_grid:
+                L = np.full(3, L0)
+                L[j] = max(L0 + o, 0.0)
+                Tj = np.full(3, T0)
+                Tj[j] = T
+                rows.append(L)
+                lag_rows.append(Tj)
+                which.append(j)
     lat = np.full(3, np.nan)
     ci = np.full((3, 2), np.nan)
+    lag_axes = np.full(3, T0)
     if rows:
-        c4 = Candidates(np.array(rows), np.full(len(rows), T0), np.full(len(rows), a0))
+        c4 = Candidates(np.array(rows), np.array(lag_rows), np.full(len(rows), a0))
         err4 = prob.simulate(c4)
         which = np.array(which)
         W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
         for j in np.flatnonzero(axes):
             sel = np.flatnonzero(which == j)
             e = err4[sel][:, :, j]                      # (K, B): axis j's own error per block
-            lat[j] = float(c4.L[sel[np.argmin(e.sum(axis=1))], j])
-            boot = c4.L[sel[np.argmin(W @ e.T, axis=1)], j]
-            ci[j] = np.quantile(boot, [0.05, 0.95])
+            best = sel[np.argmin(e.sum(axis=1))]
+            lat[j], lag_axes[j] = float(c4.L[best, j]), float(c4.T[best, j])
+            # the interval of the half-step delay (dead time + T ln 2: what the log pins down; dead time and lag
+            # trade off), given as the dead time at this axis's lag
+            picks = sel[np.argmin(W @ e.T, axis=1)]
+            half = c4.L[picks, j] + c4.T[picks, j] * np.log(2)
+            ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2)
     notes = []
     for j in np.flatnonzero(axes):
         if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
@@ -490,7 +521,8 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     if np.isfinite(a0) and a0 >= opt.accel_max:      # at the top of the grid: no limit the log can show
         a0 = np.inf
     floor = float(opt.accel_max) if not np.isfinite(a0) else float(a0)
-    return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes, lever)
+    return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes, lever,
+                      lag_axes)
 
 
 @dataclass

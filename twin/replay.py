@@ -259,8 +259,9 @@ def why_worse(j: int, cal, nominal: ReplayRun, calibrated: ReplayRun) -> str:
         reasons.append(f"open loop the calibrated model predicts {AXES[j]} better ({ra['saturating'][j]:.3f} vs "
                        f"nominal {ra['nominal'][j]:.3f}); replayed through the MuJoCo model it does not: the "
                        "simulated robot's own dynamics (Mecanum rollers, its wheel response"
-                       + (f"; the log's robot adds a {dyn.lag_s * 1e3:.0f} ms lag the simulator has no key for"
-                          if dyn is not None and dyn.lag_s > 0.05 else "") + ") differ from this robot's")
+                       + (f"; the log's robot adds a {dyn.axis_lags_s[j] * 1e3:.0f} ms lag on {AXES[j]} the simulator "
+                          "has no key for" if dyn is not None and dyn.axis_lags_s[j] > 0.05 else "")
+                       + ") differ from this robot's")
     if dyn is not None and np.isfinite(dyn.latency_ci_s[j]).all() and np.ptp(dyn.latency_ci_s[j]) > 0.05:
         reasons.append(f"its dead time is uncertain ({dyn.latency_ci_s[j, 0]:.3f}-{dyn.latency_ci_s[j, 1]:.3f} s)")
     if j in cal.delay.axes and cal.delay.axes[j].tie:

@@ -56,3 +56,43 @@ def test_differential_drive_limit_without_vy():
     st = fit_static(u, v, np.array([True, False, True]))
     assert st.v_max == pytest.approx(0.3, rel=0.05) and st.lever_m == pytest.approx(0.08, abs=0.02)
     np.testing.assert_allclose(np.diag(st.A)[[0, 2]], [1.0, 1.0], atol=0.03)
+
+
+def test_best_candidate_is_the_concentrated_likelihood_by_hand():
+    """_best: the geometric mean over the axes of each axis's summed squared error (the Gaussian likelihood with an
+    unknown noise variance per axis, concentrated). Candidate 0 has SSE (1, 100), candidate 1 (2, 60) (two blocks
+    each): the sum would take 1 (62 < 101), the likelihood takes 0 (sqrt(100) = 10 < sqrt(120) = 10.95)."""
+    from twin.limits import _best
+    err = np.zeros((2, 2, 3))
+    err[0, :, 0], err[0, :, 2] = (0.4, 0.6), (30.0, 70.0)
+    err[1, :, 0], err[1, :, 2] = (1.5, 0.5), (20.0, 40.0)
+    err[:, :, 1] = 1e6                                   # not identified: ignored
+    i, tot = _best(err, np.array([True, False, True]))
+    assert i == 0
+    np.testing.assert_allclose(tot, [10.0, np.sqrt(120.0)])
+
+
+def test_dynamic_fit_per_axis_lag_under_a_noisy_yaw():
+    """Synthetic log: vx follows its command after 80 ms with a 20 ms lag and little noise, wz after 80 ms with an
+    80 ms lag and much noise (a Mecanum base's yaw rate). The noisy yaw must not choose the lag of vx: each axis
+    gets its own, and the delay to half a step (dead time + T ln 2) comes back on both."""
+    from twin.limits import Candidates, DynamicProblem, StaticFit, fit_dynamic
+    rng = np.random.default_rng(3)
+    t_cmd = np.arange(0.0, 60.0, 0.05)
+    hold = np.repeat(rng.uniform([-0.5, 0.0, -1.0], [0.5, 0.0, 1.0], (len(t_cmd) // 20 + 1, 3)), 20, axis=0)
+    u_cmd = hold[:len(t_cmd)]
+    ts = np.arange(0.5, 59.5, 0.02)
+    axes = np.array([True, False, True])
+    st = StaticFit(np.eye(3), np.zeros(3), None, 0.0, (0.0, 0.0), False, 0.0, 0, 0.0, 0.0, np.eye(3), np.zeros(3))
+    block = np.minimum((ts - ts[0]) / (ts[-1] - ts[0]) * 6, 5).astype(int)
+    truth = DynamicProblem(t_cmd, u_cmd, ts, np.zeros((len(ts), 3)), np.ones(len(ts), bool), block, axes, st)
+    true = Candidates(np.array([[0.08, 0.08, 0.08]]), np.array([[0.02, 0.02, 0.08]]), np.array([np.inf]))
+    _, y, _, _ = truth.simulate(true, keep=True)
+    vs = y[0] + rng.normal(0.0, [0.01, 0.0, 0.15], (len(ts), 3))
+    prob = DynamicProblem(t_cmd, u_cmd, ts, vs, np.ones(len(ts), bool), block, axes, st)
+    dyn = fit_dynamic(prob)
+    half = dyn.latency_s + dyn.axis_lags_s * np.log(2)
+    assert half[0] == pytest.approx(0.08 + 0.02 * np.log(2), abs=0.004)
+    assert half[2] == pytest.approx(0.08 + 0.08 * np.log(2), abs=0.02)
+    assert dyn.axis_lags_s[0] <= 0.035 and dyn.axis_lags_s[2] >= 0.05
+    assert dyn.accel_max is None
