@@ -142,6 +142,8 @@ class StackParams:
       each of ``wall_sectors`` equal bearing sectors around the robot, so walls on both sides of a corridor are
       always represented. The imagination uses the same selection (from the initial state).
     - ``w_eps``: the regularizer epsilon of Eq. (17), in the units of |grad_u gamma|^2 [m^2].
+    - ``speed_governor``: v_b^max of Eq. (8) for BIG-CBF's behaviors is the largest speed up to the nominal limit at
+      which the command satisfies the common CBF's rows (``bigcbf.control.governor``); false: the nominal limit.
     """
 
     T_B_s: float = 0.5                  # behavior-selection period [s]
@@ -174,6 +176,7 @@ class StackParams:
     noshared_margin_m: float = 0.30     # BIG-CBF-NoShared imagination margin [m]
     max_obstacle_constraints: int = 12  # tracked obstacles in the CBF at most [-]
     wall_sectors: int = 8               # bearing sectors for wall-point constraints [-]
+    speed_governor: bool = True         # BIG-CBF's policies move at the speed the CBF admits (control/governor.py)
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):
