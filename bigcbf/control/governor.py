@@ -12,27 +12,36 @@ is about 0.47 m at full speed and 0.30 m at rest: every full-speed candidate is 
 repeats this. The execution filter has the same blind spot: it evaluates D_i^exec at u_in (Sec. III-C) and holds
 it fixed, so a full-speed u_in makes the gap infeasible for the filter too, while the same gap at 0.3 m/s is wide.
 
-**Our choice: the speed limit v_b^max of Eq. (8) is the largest speed, up to the behavior's nominal limit, at which
-the behavior's command satisfies the common CBF's rows.** For the policy's world velocity v_b (Eq. 8, direction
-kept) and a scale s in [0, 1], the command s u_b (u_b = R^T v_b) is checked against the CBF condition of Eq. (18)
+**Our choice: the speed along a candidate is the one that makes the most progress once the common CBF has acted
+on it.** For the policy's world velocity v_b (Eq. 8, direction kept) and a scale s on ``GOVERNOR_GRID``
+(1, 0.9, ..., 0.1, 0), the command s u_b (u_b = R^T v_b) is checked against the CBF condition of Eq. (18)
 (``eq:cbf_condition``) of every obstacle, with D_i^exec (Eqs. 14-15, kappa_exec) evaluated at that command, exactly
-as the execution filter evaluates it:
+as the execution filter evaluates it. In the realized velocity w (Eq. 1: w(s) = R(theta)(A s u_b + d)) each row is
+a half-plane,
 
-    gamma_i(s) = 2 q_i^T [R(theta)(A s u_b + d) - v_i] + alpha (||q_i||^2 - D_i(s u_b)^2),
-    s* = max { s in [0, 1] : min_i gamma_i(s) >= 0 },
+    gamma_i = 2 q_i^T (w - v_i) + alpha (||q_i||^2 - D_i(s u_b)^2) >= 0
+            <=>  n_i^T w >= n_i^T v_i - alpha h_i(s) / (2 ||q_i||),     n_i = q_i / ||q_i||,
 
-found on ``GOVERNOR_GRID`` scales (1, 0.9, ..., 0.1, 0) with the boundary placed by linear interpolation of
-min_i gamma_i between the largest admissible grid scale and the next one above it (so s* varies continuously with
-the state). If no scale is admissible (the robot is already inside an inflated radius and its direction does not
-lead out), s* is the grid scale with the least violation max_s min_i gamma_i (ties to the larger s); the filter
-then corrects it as before. The governed command is s* u_b.
+and the filter model (:func:`filter_model`) is the filter's QP in 2-D: the Euclidean projection of w(s) onto the
+``MODEL_ROWS`` most violated half-planes, within the speed disk v_max. Its output w*(s) is what the filter would let
+the robot do. The governed scale is
+
+    s* = argmax_s  [ e_b^T w*(s) - ||w*(s) - w(s)|| ]       (e_b = v_b / ||v_b||; near-ties to the smaller s),
+
+the progress along the behavior's direction after the filter, less the filter's correction: a command the filter
+only slows is worth its admissible part; one it bends sideways is worth the progress the sliding keeps, minus the
+bend. With one row dead ahead this is the largest admissible grid scale (the robot slows down before the obstacle
+instead of running into its inflated radius); with a row at an angle it can be full speed, sliding along the row
+(tests/control/test_control_governor.py works both out by hand). The governed command is s* u_b; in the rollout
+(Eq. 9) the robot moves with w*(s*), the filter model's velocity, while the scores (Eq. 10: W, F, S) and the
+acceptance (Eq. 16) use the governed command.
 
 Why this is principled (it holds in scenes nobody has drawn): it is the speed the filter itself would let this
 direction have, computed with the same formulas (Eqs. 14, 15, 18), the same kappa_exec and the same obstacles, so
 (i) the imagination (Eq. 9) rolls out the command that will actually be executed, and m_i in Eq. (16) is
-evaluated at that speed: a gap is judged by whether the robot can pass it at the speed it will pass it; (ii) the
-executed u_in is already CBF-admissible, so the filter leaves it alone instead of projecting it sideways (which
-bends the maneuver) and D_i^exec is evaluated at the speed actually driven. A candidate that must slow down
+evaluated at that speed: a gap is judged by whether the robot can pass it at the speed it will pass it; (ii) where
+the filter would only slow the command down, the executed u_in is already CBF-admissible, so the filter leaves it
+alone and D_i^exec is evaluated at the speed actually driven. A candidate that must slow down
 earns less progress P and, if it must stop, the freezing penalty F (Eq. 10): the speed cost is scored, not hidden.
 
 Scope: the governor is part of BIG-CBF's policies pi_b (GOAL, PASS, SIDE; YIELD commands zero, the REVERSE
@@ -41,7 +50,8 @@ obstacles O^k of Eqs. 2-3) and at every control tick (Eq. 5). BIG-CBF-NoShared s
 governor (its ablation stays in the imagination's margin). CBF-only and the baselines are untouched: their
 commands are their own. It uses every obstacle the policy sees (all tracks and wall points), a superset of the
 filter's rows (``cbf.select_constraints``), so it is never less conservative than the filter. It is switched off
-with ``StackParams.speed_governor = false``. No QP is solved: it is a scalar search over s.
+with ``StackParams.speed_governor = false``. No QP solver is called: 11 scales, each with a closed-form 2-D
+projection, for all candidates and steps at once.
 """
 from __future__ import annotations
 
@@ -99,7 +109,8 @@ def filter_model(w0, n, l, v_max: float) -> np.ndarray:
 
 
 def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
-    """The governor (module docstring) on complex planar vectors, for B robot states at once.
+    """The governor (module docstring; Eq. (18) ``eq:cbf_condition`` with D_i of Eqs. (14)-(15)
+    ``eq:shared_barrier``/``eq:uncertainty_margin``) on complex planar vectors, for B robot states at once.
 
     p (B,) positions, rot (B,) e^{i theta}, u (B,) body commands u_x + i u_y of Eq. (8) (u_w = 0), obs_p (M,)
     obstacle positions, obs_v (M,) velocities, obs_sig (M,) beta sqrt(lambda_max(Sigma_i)) [m], obs_r (M,) radii.
