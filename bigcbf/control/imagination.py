@@ -67,7 +67,7 @@ class Imagination:
         """(B,) bool: the candidates the selection may retain (:class:`bigcbf.control.selection.BehaviorSelector`):
         accepted (Eq. 16) and, for a moving behavior, *making progress*: its imagined progress P_b (Eq. 10) is at least
         what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. YIELD
-        stands still by design."""
+        stands still by design. Only with ``StackParams.speed_governor``; without it: accepted."""
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
@@ -290,12 +290,13 @@ def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackP
     :class:`bigcbf.control.selection.BehaviorSelector`) has the lowest J of Eq. (10) is chosen: the release aims at
     making a maneuver possible again rather than merely backing off. When no candidate leads to a viable behavior,
     the one with the least accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img) (it leaves the
-    inflated radii soonest and enters none on the way); ties go to the first in the fan's order, the push. Also
-    returns the candidates' imagination; the chosen row is ``index``."""
+    inflated radii soonest and enters none on the way); ties go to the first in the fan's order, the push. The
+    outlook is part of the liveness option (``StackParams.speed_governor``); without it, the least deficit alone.
+    Also returns the candidates' imagination; the chosen row is ``index``."""
     cand = release_candidates(state, obstacles, goal, params)
     img = imagine(state, obstacles, goal, params, modes=(REVERSE,) * len(cand), shared=shared, release_v=cand)
-    j_after = release_outlook(img, obstacles, goal, params, shared=shared)
-    if np.isfinite(j_after).any():
+    j_after = release_outlook(img, obstacles, goal, params, shared=shared) if params.speed_governor else None
+    if j_after is not None and np.isfinite(j_after).any():
         best = int(np.argmin(j_after))
     else:
         best = int(np.argmin(img.deficit))
@@ -397,6 +398,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    stall = (params.v_freeze_mps * N * params.dt_s, np.abs(pg - Pc[:, N]) <= params.eps_g_m)
+    stall = ((params.v_freeze_mps * N * params.dt_s, np.abs(pg - Pc[:, N]) <= params.eps_g_m)
+             if params.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
                        stall)

@@ -144,7 +144,9 @@ class StackParams:
     - ``w_eps``: the regularizer epsilon of Eq. (17), in the units of |grad_u gamma|^2 [m^2].
     - ``speed_governor``: BIG-CBF's GOAL/PASS/SIDE commands (Eq. 8) are scaled to the speed that makes the most
       progress after a 2-D model of the common CBF (rows of Eq. 18, D_i at that command), at every control tick
-      and in every rollout step (``bigcbf.control.governor``); false: Eq. (8) at the nominal limits v_b^max.
+      and in every rollout step (``bigcbf.control.governor``), with the viability test of the selection and the
+      release chosen by what it makes possible (docs/fidelity.md, liveness); false (default): Eq. (8) at the
+      nominal limits v_b^max, selection on Eq. (16) alone, release by least barrier deficit.
     """
 
     T_B_s: float = 0.5                  # behavior-selection period [s]
@@ -177,7 +179,7 @@ class StackParams:
     noshared_margin_m: float = 0.30     # BIG-CBF-NoShared imagination margin [m]
     max_obstacle_constraints: int = 12  # tracked obstacles in the CBF at most [-]
     wall_sectors: int = 8               # bearing sectors for wall-point constraints [-]
-    speed_governor: bool = True         # BIG-CBF's policies move at the speed the CBF admits (control/governor.py)
+    speed_governor: bool = False        # opt-in: BIG-CBF's policies move at the speed the CBF admits (governor.py)
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):

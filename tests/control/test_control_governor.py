@@ -11,7 +11,7 @@ from bigcbf.params import SIMULATION, ExecutionModel, UncertaintyParams
 from bigcbf.types import Obstacles, RobotState
 
 # no uncertainty terms and ideal execution: D = r_R + r_i + d0 = 0.15 + 0.25 + 0.10 = 0.5 for r_i = 0.25
-BARE = dataclasses.replace(SIMULATION, uncertainty=UncertaintyParams(
+BARE = dataclasses.replace(SIMULATION, speed_governor=True, uncertainty=UncertaintyParams(
     tau95_s=0.0, beta=0.0, e_zoh_m=0.0, execution=ExecutionModel(residual_bound_mps=(0.0, 0.0))))
 
 

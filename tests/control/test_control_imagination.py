@@ -99,8 +99,9 @@ IMPERFECT = dataclasses.replace(SIMULATION, uncertainty=dataclasses.replace(
         residual_speed_mps=(0.0, 0.3, 0.8), residual_bound_mps=(0.01, 0.03, 0.06))))
 
 
-@pytest.mark.parametrize("params", [SIMULATION, IMPERFECT, PHYSICAL,
-                                    dataclasses.replace(SIMULATION, speed_governor=False)])
+@pytest.mark.parametrize("params", [SIMULATION, IMPERFECT, PHYSICAL,       # and with the liveness option:
+                                    dataclasses.replace(SIMULATION, speed_governor=True),
+                                    dataclasses.replace(IMPERFECT, speed_governor=True)])
 @pytest.mark.parametrize("shared", [True, False])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_vectorized_matches_reference(params, shared, seed):

@@ -1,4 +1,5 @@
 """Behavior selection: hand-built situations in closed loop, dwell time, switching threshold, fallback, timing."""
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from bigcbf.params import SIMULATION
 from bigcbf.types import Obstacles, RobotState
 
 P = SIMULATION
+GOV = dataclasses.replace(SIMULATION, speed_governor=True)     # the liveness option (governor.py)
 GOAL = np.array([5.0, 0.0])
 
 
@@ -41,10 +43,8 @@ def test_static_obstacle_dead_ahead_pass_kept_without_chattering():
     obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
     sel, state, min_h = closed_loop(BigCbfPlanner(P), lambda t: obs, GOAL, 10 * P.T_B_s)
     assert len(sel) == 10
-    # the governed GOAL slows down in front of the post (governor.py) and is kept while it progresses; a sided
-    # maneuver takes over before the post, on one side only: no left/right chattering
-    assert any(m.startswith(("PASS", "SIDE")) for m in sel)
-    assert len({side(m) for m in sel} - {None}) == 1
+    assert sel[0].startswith(("PASS", "SIDE"))
+    assert len({side(m) for m in sel} - {None}) == 1          # one side only: no left/right chattering
     assert np.linalg.norm(state.p - obs.p[0]) > 0.45 and min_h > 0
     # it does get past the obstacle and on to the goal
     sel, state, _ = closed_loop(BigCbfPlanner(P), lambda t: obs, GOAL, 10.0)
@@ -61,8 +61,7 @@ def test_crossing_pedestrian_yield_or_pass_behind():
     planner.plan(0.0, RobotState(0, 0, 0), pedestrian(0.0), GOAL)
     assert planner.mode in ("YIELD", "PASS-R", "SIDE-R")     # behind it = on its right (where it comes from)
     img = planner.last_imagination
-    # straight on (governed: it slows down in front of the person) scores worse than going behind
-    assert img.J[img.index("GOAL")] > img.J[img.index(planner.mode)]
+    assert not img.accepted[img.index("GOAL")]               # straight on would cut in front of it
     _, state, min_h = closed_loop(BigCbfPlanner(P), pedestrian, GOAL, 8.0)
     assert min_h > -P.eps_h_m2 and np.linalg.norm(state.p - GOAL) <= P.eps_g_m
 
@@ -81,21 +80,15 @@ def pocket():
 
 
 def test_everything_blocked_reverse_release():
-    """0.35 m from the pocket's end wall the governed behaviors are accepted (they stop short of the wall) but none
-    makes progress: each gains less than v_freeze N dt = 0.05 * 15 * 0.1 = 0.075 m, so none is viable and the
-    fallback backs straight out."""
     walls = pocket()
     planner = BigCbfPlanner(P)
-    u, info = planner.plan(0.0, RobotState(0.25, 0, 0), walls, np.array([4.0, 0.0]))
-    img = planner.last_imagination
+    u, info = planner.plan(0.0, RobotState(0, 0, 0), walls, np.array([4.0, 0.0]))
     assert info.mode == "REVERSE" and info.planned
-    assert img.accepted[:5].all() and not img.viable.any()
-    assert np.all(img.P[:5] < P.v_freeze_mps * P.N * P.dt_s)
+    assert not planner.last_imagination.accepted.any()
     np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)   # straight back out of the pocket
-    assert info.path.shape == (P.N + 1, 2) and info.path[-1, 0] < 0.25 - 0.3
-    sel, _, min_h = closed_loop(BigCbfPlanner(P), lambda t: walls, np.array([4.0, 0.0]), 5.0,
-                                RobotState(0.25, 0, 0))
-    assert sel[0] == "REVERSE" and sel[1] != "REVERSE" and min_h > 0   # released, then a regular behavior again
+    assert info.path.shape == (P.N + 1, 2) and info.path[-1, 0] < -0.3
+    sel, _, _ = closed_loop(BigCbfPlanner(P), lambda t: walls, np.array([4.0, 0.0]), 5.0)
+    assert sel[0] == "REVERSE" and sel[-1] != "REVERSE"      # released, then a regular behavior again
 
 
 def test_robot_inside_margin_rejects_everything():
@@ -126,26 +119,16 @@ def test_release_leaves_an_approaching_pedestrian_path_not_just_a_wall():
     assert img.deficit[i] >= 0 and (img.deficit == 0).sum() < len(cand)
 
 
-def test_release_from_inside_a_static_margin_backs_off_towards_a_viable_maneuver():
-    """Inside the post's margin every behavior is rejected. Straight back (the push) leaves the robot on the goal
-    line behind the post; a diagonal back-off leaves it where a PASS is viable sooner: the release is chosen by the
-    lowest J of a viable behavior imagined T_B after it (release_outlook)."""
-    from bigcbf.control.imagination import choose_release, release_candidates, release_outlook
+def test_release_from_inside_a_static_margin_backs_straight_off():
     obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
     planner = BigCbfPlanner(P)
     u, info = planner.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
     assert info.mode == "REVERSE"
-    v, img, best = choose_release(RobotState(0, 0, 0), obs, GOAL, P)
-    cand = release_candidates(RobotState(0, 0, 0), obs, GOAL, P)
-    J_after = release_outlook(img, obs, GOAL, P)
-    assert np.isfinite(J_after).any() and J_after[best] == J_after.min()
-    assert v == pytest.approx([cand[best].real, cand[best].imag])
-    np.testing.assert_allclose(u[:2], v, atol=1e-9)                # body = world at yaw 0
-    assert u[0] < 0 and np.hypot(*v) == pytest.approx(P.v_release_mps)
+    np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)
     # between selections the release velocity is kept (in the world frame; the body command follows the yaw)
     u2, info2 = planner.plan(0.05, RobotState(-0.015, 0, math.pi / 2), obs, GOAL)
     assert not info2.planned and info2.mode == "REVERSE"
-    np.testing.assert_allclose(u2, [v[1], -v[0], 0.0], atol=1e-9)
+    np.testing.assert_allclose(u2, [0.0, P.v_release_mps, 0.0], atol=1e-9)
 
 
 def fake(J, accepted, modes=("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")):
@@ -206,6 +189,71 @@ def test_noshared_variant_runs_the_same_loop():
     obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
     _, state, _ = closed_loop(planner, lambda t: obs, GOAL, 10.0)
     assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_static_obstacle_dead_ahead_one_side():
+    obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
+    sel, state, min_h = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10 * P.T_B_s)
+    assert len(sel) == 10
+    # the governed GOAL slows down in front of the post (governor.py) and is kept while it progresses; a sided
+    # maneuver takes over before the post, on one side only: no left/right chattering
+    assert any(m.startswith(("PASS", "SIDE")) for m in sel)
+    assert len({side(m) for m in sel} - {None}) == 1
+    assert np.linalg.norm(state.p - obs.p[0]) > 0.45 and min_h > 0
+    # it does get past the obstacle and on to the goal
+    sel, state, _ = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10.0)
+    assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_crossing_pedestrian_pass_behind():
+    planner = BigCbfPlanner(GOV)
+    planner.plan(0.0, RobotState(0, 0, 0), pedestrian(0.0), GOAL)
+    assert planner.mode in ("YIELD", "PASS-R", "SIDE-R")     # behind it = on its right (where it comes from)
+    img = planner.last_imagination
+    # straight on (governed: it slows down in front of the person) scores worse than going behind
+    assert img.J[img.index("GOAL")] > img.J[img.index(planner.mode)]
+    _, state, min_h = closed_loop(BigCbfPlanner(GOV), pedestrian, GOAL, 8.0)
+    assert min_h > -P.eps_h_m2 and np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_pocket_nothing_viable_reverse_release():
+    """0.35 m from the pocket's end wall the governed behaviors are accepted (they stop short of the wall) but none
+    makes progress: each gains less than v_freeze N dt = 0.05 * 15 * 0.1 = 0.075 m, so none is viable and the
+    fallback backs straight out."""
+    walls = pocket()
+    planner = BigCbfPlanner(GOV)
+    u, info = planner.plan(0.0, RobotState(0.25, 0, 0), walls, np.array([4.0, 0.0]))
+    img = planner.last_imagination
+    assert info.mode == "REVERSE" and info.planned
+    assert img.accepted[:5].all() and not img.viable.any()
+    assert np.all(img.P[:5] < GOV.v_freeze_mps * GOV.N * GOV.dt_s)
+    np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)   # straight back out of the pocket
+    assert info.path.shape == (P.N + 1, 2) and info.path[-1, 0] < 0.25 - 0.3
+    sel, _, min_h = closed_loop(BigCbfPlanner(GOV), lambda t: walls, np.array([4.0, 0.0]), 5.0,
+                                RobotState(0.25, 0, 0))
+    assert sel[0] == "REVERSE" and sel[1] != "REVERSE" and min_h > 0   # released, then a regular behavior again
+
+
+def test_release_from_inside_a_static_margin_backs_off_towards_a_viable_maneuver():
+    """Inside the post's margin every behavior is rejected. Straight back (the push) leaves the robot on the goal
+    line behind the post; a diagonal back-off leaves it where a PASS is viable sooner: the release is chosen by the
+    lowest J of a viable behavior imagined T_B after it (release_outlook)."""
+    from bigcbf.control.imagination import choose_release, release_candidates, release_outlook
+    obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
+    planner = BigCbfPlanner(GOV)
+    u, info = planner.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert info.mode == "REVERSE"
+    v, img, best = choose_release(RobotState(0, 0, 0), obs, GOAL, GOV)
+    cand = release_candidates(RobotState(0, 0, 0), obs, GOAL, GOV)
+    J_after = release_outlook(img, obs, GOAL, GOV)
+    assert np.isfinite(J_after).any() and J_after[best] == J_after.min()
+    assert v == pytest.approx([cand[best].real, cand[best].imag])
+    np.testing.assert_allclose(u[:2], v, atol=1e-9)                # body = world at yaw 0
+    assert u[0] < 0 and np.hypot(*v) == pytest.approx(P.v_release_mps)
+    # between selections the release velocity is kept (in the world frame; the body command follows the yaw)
+    u2, info2 = planner.plan(0.05, RobotState(-0.015, 0, math.pi / 2), obs, GOAL)
+    assert not info2.planned and info2.mode == "REVERSE"
+    np.testing.assert_allclose(u2, [v[1], -v[0], 0.0], atol=1e-9)
 
 
 def test_viable_is_accepted_and_progressing():
