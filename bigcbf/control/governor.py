@@ -49,9 +49,11 @@ fallback keeps its chosen release velocity), applied identically in the rollout 
 obstacles O^k of Eqs. 2-3) and at every control tick (Eq. 5). BIG-CBF-NoShared shares the policies, so it shares the
 governor (its ablation stays in the imagination's margin). CBF-only and the baselines are untouched: their
 commands are their own. It uses every obstacle the policy sees (all tracks and wall points), a superset of the
-filter's rows (``cbf.select_constraints``), so it is never less conservative than the filter. It is switched off
-with ``StackParams.speed_governor = false``. No QP solver is called: 11 scales, each with a closed-form 2-D
-projection, for all candidates and steps at once.
+filter's rows (``cbf.select_constraints``), so it is never less conservative than the filter. It is an option,
+off by default: ``StackParams.speed_governor = true`` (``[stack]`` of a run configuration) switches it on together
+with the selection's viability test and the release outlook (docs/fidelity.md, "Liveness"), which it needs; on the
+nine paper scenes it is worse than the paper's reading (measured there). No QP solver is called: 11 scales, each
+with a closed-form 2-D projection, for all candidates and steps at once.
 """
 from __future__ import annotations
 
