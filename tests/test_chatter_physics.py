@@ -119,3 +119,21 @@ def test_slow_walker_corridor_counts_match_an_independent_recount(tmp_path):
     # switches per minute: the mode history's changes over the episode's duration
     changes = sum(1 for a, b in zip(steps, steps[1:]) if a[1] != b[1])
     assert res.mode_switches_per_min == pytest.approx(60.0 * changes / res.time_s)
+
+
+@pytest.mark.slow
+def test_a_post_field_that_made_big_cbf_flip_sides_is_crossed_with_at_most_one_reversal(tmp_path):
+    """Generated world posts_00003 (dev split; `bigcbf scenarios generate posts --seed 3`): staggered rows of round
+    posts. Without the liveness option (speed governor, viability test, release outlook; issue 13) BIG-CBF entered a gap, had every candidate
+    rejected by Eq. (16) short of its narrowest point, fell back to REVERSE and tried again, switching sides 14
+    times, until the time limit. Now it must cross with at most one left/right reversal and no collision."""
+    from bigcbf.api import run_episode
+    from bigcbf.worlds import generate
+    f = tmp_path / "posts_00003.toml"
+    f.write_text(generate("posts", 3).toml)
+    cfg = tmp_path / "run.toml"
+    cfg.write_text("[stack]\nspeed_governor = true\n")        # the liveness option (docs/fidelity.md)
+    res = run_episode(f, "big-cbf", 0, config=cfg)
+    assert not res.collision
+    assert res.side_reversals <= 1 and res.lateral_reversals <= 1
+    assert res.success

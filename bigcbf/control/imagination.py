@@ -30,6 +30,7 @@ from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, I
                         MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, goal_basis, mode_indices,
                         obstacle_groups, release_directions_c, release_velocity, speed_limits)
 from .faults import perception_fault
+from .governor import govern_c, obstacle_sigma_term
 from .prediction import predict_obstacles, q_sigma_for
 from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
 
@@ -56,9 +57,23 @@ class Imagination:
     deficit: np.ndarray | None = None    # (B,) sum over k = 1..N of max(0, -min_i h^img) [m^2] (the fallback's choice)
     margin: np.ndarray | None = None     # (B, N+1, M) the imagination's margin D_i - (r_R + r_i + d0) [m]: kappa_img
                                          # m_i (Eq. 14), or BIG-CBF-NoShared's fixed margin
+    #: (v_freeze N dt [m], (B,) bool: the rollout ends in the goal region), for :attr:`viable`
+    params_stall: tuple | None = None
 
     def index(self, mode: str) -> int:
         return self.modes.index(mode)
+
+    @property
+    def viable(self) -> np.ndarray:
+        """(B,) bool: the candidates the selection may retain (:class:`bigcbf.control.selection.BehaviorSelector`):
+        accepted (Eq. 16) and, for a moving behavior, *making progress*: its imagined progress P_b (Eq. 10) is at least
+        what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. YIELD
+        stands still by design. Only with ``StackParams.speed_governor``; without it: accepted."""
+        if self.params_stall is None:
+            return np.asarray(self.accepted)
+        p_stall, goal_reached = self.params_stall
+        stalled = (np.asarray(self.P) < p_stall) & ~goal_reached & np.array([m != "YIELD" for m in self.modes])
+        return np.asarray(self.accepted) & ~stalled
 
 
 def _real_linear_as_complex(M2) -> tuple[complex, complex]:
@@ -86,6 +101,7 @@ class _Constants:
         self.goal_rows = np.flatnonzero(self.goal_f).tolist()
         self.vmax = speed_limits(params)[midx]
         self.is_rev = midx == MODE_INDEX[REVERSE]
+        self.governed = ~self.is_rev & (midx != MODE_INDEX["YIELD"])     # rows the speed governor applies to
         self.any_rev = bool(self.is_rev.any())
         # execution model, Eq. (1): body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
         A = np.asarray(ex.A, float)
@@ -124,7 +140,7 @@ class _Rollout:
 
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
-             release_v: np.ndarray | None = None) -> _Rollout:
+             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> _Rollout:
     """Eq. (9): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot propagated with
     the nominal Eq. (1), obstacles with Eqs. 2-3). Planar vectors are complex numbers (x + i y; R(theta) is
     multiplication by e^{i theta}); all behaviors advance together, one numpy op per term and step.
@@ -151,13 +167,21 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         release_reach = base + params.release_range_m
         obs_vz = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
         flat_rows = np.arange(B) * M
+        govern = params.speed_governor and bool(K.governed.any())
+        if govern:
+            sig_k = obstacle_sigma_term(cov, params)                   # (N+1, M)
+            gov_rows = np.flatnonzero(K.governed)
         if any_pass:     # the relevant obstacle's group (Eq. (7) d_pass), from the obstacles at k = 0
             groups = obstacle_groups(obstacles.p, r, params)
             lone = bool(np.all(np.bincount(groups) == 1))
             same_group = groups[:, None] == groups[None, :]
 
-    p = np.full(B, complex(state.px, state.py))
-    th = np.full(B, float(state.theta))
+    if start is None:
+        p = np.full(B, complex(state.px, state.py))
+        th = np.full(B, float(state.theta))
+    else:                          # one start state per row: positions (B,) complex, yaws (B,)
+        p = np.array(start[0], complex)
+        th = np.array(start[1], float)
     rot = np.exp(1j * th)
     conj_rot = np.conj(rot)
     # (N+1, B) layouts: one contiguous row per step
@@ -198,6 +222,11 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
         v = e * np.minimum(gain, vmax * (dist > eps_g) / np.maximum(np.abs(e), _TINY))
+        w_gov = None
+        if M and govern:     # the governed speed and the filter model's velocity (governor.py)
+            gr = gov_rows
+            s_gov, w_gov = govern_c(p[gr], rot[gr], v[gr] * conj_rot[gr], Oc[k], obs_vz, sig_k[k], r, params)
+            v[gr] = v[gr] * s_gov
         if any_rev and release_v is not None:                        # chosen release velocities
             v = np.where(is_rev, release_v * (dist > eps_g), v)
         elif any_rev:                                                 # reverse-release fallback rows: the push
@@ -215,6 +244,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         # nominal execution (Eq. 1) and propagation over dt
         vreal = v if ideal_xy else rot * (a_c * u + b_c * np.conj(u) + d_c)
         Vk[k] = vreal
+        if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
+            vreal = vreal.copy()
+            vreal[gr] = w_gov
         p = p + dt * vreal
         if turning:
             th = th + dt * (a20 * u.real + a21 * u.imag + dw)
@@ -224,7 +256,6 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Pk[N] = p
     Uk[N] = u = Uk[N - 1]
     Vk[N] = rot * (a_c * u + b_c * np.conj(u) + d_c)       # u_{N-1} realized at the terminal yaw
-
     return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov)
 
 
@@ -252,21 +283,52 @@ def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: St
 
 def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
                    shared: bool = True) -> tuple[np.ndarray, Imagination, int]:
-    """The reverse-release fallback's velocity (2,) [m/s, odom]: of :func:`release_candidates`, the one whose
-    imagined rollout (Eq. 9, with the same prediction and shared barrier as the behaviors, Eqs. 14-16) has the least
-    accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img): it leaves the inflated radii soonest and
-    enters none on the way; ties (e.g. every candidate stays outside) go to the first in the fan's order, the push.
-    (The worst case min_k h would favour standing still: moving grows D through tau95 |v - v_i| and e_exec(u)
-    before the robot has moved away.) Also returns the candidates' imagination; the chosen row is ``index``."""
+    """The reverse-release fallback's velocity (2,) [m/s, odom], chosen from :func:`release_candidates` by what it
+    makes possible: each candidate's rollout (Eq. 9, the same prediction and shared barrier as the behaviors,
+    Eqs. 14-16) is followed for one selection period T_B (the time it will be executed before the next selection),
+    and from where it leaves the robot the six behaviors are imagined again (the obstacles predicted T_B ahead,
+    Eqs. 2-3). The candidate after which the best *viable* behavior (accepted by Eq. (16) and not frozen; see
+    :class:`bigcbf.control.selection.BehaviorSelector`) has the lowest J of Eq. (10) is chosen: the release aims at
+    making a maneuver possible again rather than merely backing off. When no candidate leads to a viable behavior,
+    the one with the least accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img) (it leaves the
+    inflated radii soonest and enters none on the way); ties go to the first in the fan's order, the push. The
+    outlook is part of the liveness option (``StackParams.speed_governor``); without it, the least deficit alone.
+    Also returns the candidates' imagination; the chosen row is ``index``."""
     cand = release_candidates(state, obstacles, goal, params)
     img = imagine(state, obstacles, goal, params, modes=(REVERSE,) * len(cand), shared=shared, release_v=cand)
-    best = int(np.argmin(img.deficit))
+    j_after = release_outlook(img, obstacles, goal, params, shared=shared) if params.speed_governor else None
+    if j_after is not None and np.isfinite(j_after).any():
+        best = int(np.argmin(j_after))
+    else:
+        best = int(np.argmin(img.deficit))
     return np.array([cand[best].real, cand[best].imag]), img, best
+
+
+def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackParams, *,
+                    shared: bool = True) -> np.ndarray:
+    """For each release rollout of ``rel``: the lowest J (Eq. 10) of a viable behavior imagined from the state the
+    release reaches after T_B (+inf when none is viable), see :func:`choose_release`."""
+    R = len(rel.modes)
+    kB = min(int(round(params.T_B_s / params.dt_s)), params.N)
+    tB = kB * params.dt_s
+    ahead = obstacles
+    if len(obstacles):
+        q = q_sigma_for(obstacles, params.uncertainty)
+        ahead = Obstacles(obstacles.p + tB * obstacles.v, obstacles.v,
+                          obstacles.cov + (tB * q)[:, None, None] * np.eye(2), obstacles.r, obstacles.static,
+                          obstacles.ids)
+    nb = len(BEHAVIORS)
+    p0 = np.repeat(rel.p[:, kB, 0] + 1j * rel.p[:, kB, 1], nb)
+    th0 = np.repeat(rel.theta[:, kB], nb)
+    img = imagine(RobotState(0.0, 0.0, 0.0), ahead, goal, params, modes=BEHAVIORS * R, shared=shared,
+                  start=(p0, th0))
+    J = np.where(img.viable, img.J, np.inf).reshape(R, nb)
+    return J.min(axis=1)
 
 
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
-            release_v: np.ndarray | None = None) -> Imagination:
+            release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> Imagination:
     """Eq. (9) rollouts of ``modes`` from ``state`` and their scores (Eqs. 10, 16, 17).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
@@ -286,7 +348,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     goal = np.asarray(goal, float)
     pg = complex(goal[0], goal[1])
     ro = _rollout(state, obstacles, goal, params, tuple(modes),
-                  None if release_v is None else np.asarray(release_v, complex))
+                  None if release_v is None else np.asarray(release_v, complex), start)
     K, Pc, Vc, Uc, TH, Oc, cov = ro.K, ro.P, ro.V, ro.U, ro.TH, ro.Oc, ro.cov
     B, M = K.B, len(obstacles)
     A, unit_gradient = K.A, K.unit_gradient
@@ -333,7 +395,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
 
     # ---- scores (Eq. 10)
     P_hist = np.stack([Pc.real, Pc.imag], -1)
-    Pr = abs(pg - complex(state.px, state.py)) - np.abs(pg - Pc[:, N])
+    Pr = np.abs(pg - Pc[:, 0]) - np.abs(pg - Pc[:, N])
     outside = np.abs(pg - Pc[:, :N]) > params.eps_g_m      # standing still inside the goal region is arrival
     F = np.mean((speed[:, :N] < params.v_freeze_mps) & outside, axis=1)
     dU = np.diff(Uc[:, :N], axis=1)
@@ -343,4 +405,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin)
+    stall = ((params.v_freeze_mps * N * params.dt_s, np.abs(pg - Pc[:, N]) <= params.eps_g_m)
+             if params.speed_governor else None)
+    return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
+                       stall)

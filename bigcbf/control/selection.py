@@ -23,7 +23,7 @@ class BehaviorSelector:
     """Keeps b_cur and decides, at each selection, between keeping it and switching.
 
     Rules, in order:
-    1. No candidate accepted (Eq. 16 rejects all, or only unavailable ones remain): REVERSE (fallback).
+    1. No candidate viable (Eq. 16 rejects all, or only unavailable or frozen ones remain): REVERSE (fallback).
     2. No retained regular mode yet, or the retained one is REVERSE or now rejected: the lowest-J accepted one.
     3. The retained mode was selected less than ``dwell_s`` ago: keep it.
     4. Switch only if the best accepted J beats J_cur by more than switch_rel |J_cur| + switch_abs; else keep.
@@ -36,6 +36,15 @@ class BehaviorSelector:
     selected. Without this, the symmetric scenes the paper targets (an obstacle square on
     the goal line) tie PASS-L with PASS-R and SIDE-L with SIDE-R, and a forced switch (the retained mode
     rejected) could flip sides, undoing the manoeuvre; the paper's liveness argument rests on commitment.
+
+    Frozen candidates (our choice; the paper invokes the fallback "if all regular behaviors fail the acceptance
+    test"): with the speed governor (``bigcbf.control.governor``) a behavior whose direction is blocked does not
+    run into the inflated radius, where Eq. (16) would reject it; it slows down to a stop in front of it. A moving
+    behavior (GOAL, PASS, SIDE) whose governed rollout gains less progress P_b (Eq. 10) than the freeze speed
+    would over the horizon, v_freeze N dt, and does not end in the goal region, can no more proceed than a rejected
+    one, so it is treated as one (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and
+    when no candidate is left the reverse-release fallback is invoked, as when all are rejected. YIELD is exempt
+    (standing still is what it does). Rules 1-4 read "viable" for "accepted".
     """
 
     def __init__(self, params: StackParams):
@@ -64,7 +73,7 @@ class BehaviorSelector:
 
     def select(self, t: float, img: Imagination) -> Selection:
         p = self.params
-        acc = img.accepted
+        acc = img.viable
         prev = self.mode
         if not acc.any():
             sel = Selection(REVERSE, "fallback", prev != REVERSE)

@@ -167,7 +167,7 @@ class StackParams:
       ``bigcbf.control.behaviors``.
     - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
       (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
-    - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (every regular behavior rejected):
+    - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior viable):
       move away from obstacles closer than r_R + r_i + d0 + release_range_m, else straight back from the goal.
     - ``u_min``/``u_max``: actuator box of the QP (Eq. 19); must contain 0 (the braking fallback).
     - ``H_diag``, ``R_u_diag``: diagonal weights of Eq. (19) and of E_CBF (Eq. 20); identity (all channels in
@@ -177,6 +177,11 @@ class StackParams:
       each of ``wall_sectors`` equal bearing sectors around the robot, so walls on both sides of a corridor are
       always represented. The imagination uses the same selection (from the initial state).
     - ``w_eps``: the regularizer epsilon of Eq. (17), in the units of |grad_u gamma|^2 [m^2].
+    - ``speed_governor``: BIG-CBF's GOAL/PASS/SIDE commands (Eq. 8) are scaled to the speed that makes the most
+      progress after a 2-D model of the common CBF (rows of Eq. 18, D_i at that command), at every control tick
+      and in every rollout step (``bigcbf.control.governor``), with the viability test of the selection and the
+      release chosen by what it makes possible (docs/fidelity.md, liveness); false (default): Eq. (8) at the
+      nominal limits v_b^max, selection on Eq. (16) alone, release by least barrier deficit.
     """
 
     T_B_s: float = 0.5                  # behavior-selection period [s]
@@ -209,6 +214,7 @@ class StackParams:
     noshared_margin_m: float = 0.30     # BIG-CBF-NoShared imagination margin [m]
     max_obstacle_constraints: int = 12  # tracked obstacles in the CBF at most [-]
     wall_sectors: int = 8               # bearing sectors for wall-point constraints [-]
+    speed_governor: bool = False        # opt-in: BIG-CBF's policies move at the speed the CBF admits (governor.py)
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bigcbf.control.behaviors import BEHAVIORS, behavior_command, obstacle_groups
+from bigcbf.control.governor import govern_c, obstacle_sigma_term
 from bigcbf.control.imagination import imagine, rollout_paths
 from bigcbf.control.prediction import predict_obstacles, q_sigma_for
 from bigcbf.control.uncertainty import inflated_radius, uncertainty_radius
@@ -47,6 +48,12 @@ def reference(state, obs, goal, params, modes, shared, current):
         for k in range(N):
             o_k = Obstacles(Pp[k], obs.v, cov[k], obs.r, obs.static, obs.ids)
             u = behavior_command(b, RobotState(x[0], x[1], th), o_k, goal, params, groups)
+            move = None
+            if params.speed_governor and b not in ("YIELD", "REVERSE") and len(obs):   # governor.py, per state
+                s, w = govern_c(np.array([complex(*x)]), np.array([np.exp(1j * th)]), np.array([complex(*u[:2])]),
+                                Pp[k, :, 0] + 1j * Pp[k, :, 1], obs.v[:, 0] + 1j * obs.v[:, 1],
+                                obstacle_sigma_term(cov[k], params), obs.r, params)
+                u, move = u * s[0], np.array([w[0].real, w[0].imag])
             us.append(u)
             vreal = rot(th) @ (A[:2] @ u + d[:2])
             hk = h_of(x, th, u, k)
@@ -56,7 +63,7 @@ def reference(state, obs, goal, params, modes, shared, current):
                 gamma = 2 * q @ (vreal - obs.v[i]) + params.alpha_per_s * hk[i]
                 grad = 2 * A[:2].T @ rot(th).T @ q
                 W += max(-gamma, 0.0) ** 2 / (grad @ grad + params.w_eps)
-            x = x + dt * vreal
+            x = x + dt * (vreal if move is None else move)
             th = th + dt * (A[2] @ u + d[2])
             xs.append(x.copy())
         hs += h_of(x, th, us[-1], N)
@@ -92,7 +99,9 @@ IMPERFECT = dataclasses.replace(SIMULATION, uncertainty=dataclasses.replace(
         residual_speed_mps=(0.0, 0.3, 0.8), residual_bound_mps=(0.01, 0.03, 0.06))))
 
 
-@pytest.mark.parametrize("params", [SIMULATION, IMPERFECT, PHYSICAL])
+@pytest.mark.parametrize("params", [SIMULATION, IMPERFECT, PHYSICAL,       # and with the liveness option:
+                                    dataclasses.replace(SIMULATION, speed_governor=True),
+                                    dataclasses.replace(IMPERFECT, speed_governor=True)])
 @pytest.mark.parametrize("shared", [True, False])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_vectorized_matches_reference(params, shared, seed):
@@ -117,7 +126,7 @@ def test_one_step_by_hand_eqs_10_16_17():
     J = 0.294544 - 1.5 * 0.08 + 0.05 * 0.64 = 0.206544. States k = 0, 1: h = 0.24 and 0.62^2 - 0.25 = 0.1344."""
     unc = UncertaintyParams(tau95_s=0.0, beta=0.0, e_zoh_m=0.0, execution=ExecutionModel(
         residual_bound_mps=(0.0, 0.0)))
-    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc)
+    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc, speed_governor=False)   # Eq. (8) literally
     obs = Obstacles.from_lists([[0.7, 0.0]], r=0.25)
     img = imagine(RobotState(0, 0, 0), obs, np.array([5.0, 0.0]), params, current="GOAL")
     g = img.index("GOAL")

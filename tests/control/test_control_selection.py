@@ -1,4 +1,5 @@
 """Behavior selection: hand-built situations in closed loop, dwell time, switching threshold, fallback, timing."""
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from bigcbf.params import SIMULATION
 from bigcbf.types import Obstacles, RobotState
 
 P = SIMULATION
+GOV = dataclasses.replace(SIMULATION, speed_governor=True)     # the liveness option (governor.py)
 GOAL = np.array([5.0, 0.0])
 
 
@@ -187,3 +189,91 @@ def test_noshared_variant_runs_the_same_loop():
     obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
     _, state, _ = closed_loop(planner, lambda t: obs, GOAL, 10.0)
     assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_static_obstacle_dead_ahead_one_side():
+    obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
+    sel, state, min_h = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10 * P.T_B_s)
+    assert len(sel) == 10
+    # the governed GOAL slows down in front of the post (governor.py) and is kept while it progresses; a sided
+    # maneuver takes over before the post, on one side only: no left/right chattering
+    assert any(m.startswith(("PASS", "SIDE")) for m in sel)
+    assert len({side(m) for m in sel} - {None}) == 1
+    assert np.linalg.norm(state.p - obs.p[0]) > 0.45 and min_h > 0
+    # it does get past the obstacle and on to the goal
+    sel, state, _ = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10.0)
+    assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_crossing_pedestrian_pass_behind():
+    planner = BigCbfPlanner(GOV)
+    planner.plan(0.0, RobotState(0, 0, 0), pedestrian(0.0), GOAL)
+    assert planner.mode in ("YIELD", "PASS-R", "SIDE-R")     # behind it = on its right (where it comes from)
+    img = planner.last_imagination
+    # straight on (governed: it slows down in front of the person) scores worse than going behind
+    assert img.J[img.index("GOAL")] > img.J[img.index(planner.mode)]
+    _, state, min_h = closed_loop(BigCbfPlanner(GOV), pedestrian, GOAL, 8.0)
+    assert min_h > -P.eps_h_m2 and np.linalg.norm(state.p - GOAL) <= P.eps_g_m
+
+
+def test_governed_pocket_nothing_viable_reverse_release():
+    """0.35 m from the pocket's end wall the governed behaviors are accepted (they stop short of the wall) but none
+    makes progress: each gains less than v_freeze N dt = 0.05 * 15 * 0.1 = 0.075 m, so none is viable and the
+    fallback backs straight out."""
+    walls = pocket()
+    planner = BigCbfPlanner(GOV)
+    u, info = planner.plan(0.0, RobotState(0.25, 0, 0), walls, np.array([4.0, 0.0]))
+    img = planner.last_imagination
+    assert info.mode == "REVERSE" and info.planned
+    assert img.accepted[:5].all() and not img.viable.any()
+    assert np.all(img.P[:5] < GOV.v_freeze_mps * GOV.N * GOV.dt_s)
+    np.testing.assert_allclose(u, [-P.v_release_mps, 0.0, 0.0], atol=1e-9)   # straight back out of the pocket
+    assert info.path.shape == (P.N + 1, 2) and info.path[-1, 0] < 0.25 - 0.3
+    sel, _, min_h = closed_loop(BigCbfPlanner(GOV), lambda t: walls, np.array([4.0, 0.0]), 5.0,
+                                RobotState(0.25, 0, 0))
+    assert sel[0] == "REVERSE" and sel[1] != "REVERSE" and min_h > 0   # released, then a regular behavior again
+
+
+def test_release_from_inside_a_static_margin_backs_off_towards_a_viable_maneuver():
+    """Inside the post's margin every behavior is rejected. Straight back (the push) leaves the robot on the goal
+    line behind the post; a diagonal back-off leaves it where a PASS is viable sooner: the release is chosen by the
+    lowest J of a viable behavior imagined T_B after it (release_outlook)."""
+    from bigcbf.control.imagination import choose_release, release_candidates, release_outlook
+    obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
+    planner = BigCbfPlanner(GOV)
+    u, info = planner.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
+    assert info.mode == "REVERSE"
+    v, img, best = choose_release(RobotState(0, 0, 0), obs, GOAL, GOV)
+    cand = release_candidates(RobotState(0, 0, 0), obs, GOAL, GOV)
+    J_after = release_outlook(img, obs, GOAL, GOV)
+    assert np.isfinite(J_after).any() and J_after[best] == J_after.min()
+    assert v == pytest.approx([cand[best].real, cand[best].imag])
+    np.testing.assert_allclose(u[:2], v, atol=1e-9)                # body = world at yaw 0
+    assert u[0] < 0 and np.hypot(*v) == pytest.approx(P.v_release_mps)
+    # between selections the release velocity is kept (in the world frame; the body command follows the yaw)
+    u2, info2 = planner.plan(0.05, RobotState(-0.015, 0, math.pi / 2), obs, GOAL)
+    assert not info2.planned and info2.mode == "REVERSE"
+    np.testing.assert_allclose(u2, [v[1], -v[0], 0.0], atol=1e-9)
+
+
+def test_viable_is_accepted_and_progressing():
+    """Imagination.viable: accepted (Eq. 16) and, for GOAL/PASS/SIDE, progress P (Eq. 10) of at least
+    v_freeze N dt = 0.075 m unless the rollout ends in the goal region; YIELD is exempt. A frozen behavior is not
+    retained; when nothing is viable the selector falls back to REVERSE."""
+    modes = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")
+    B = len(modes)
+    z = np.zeros(B)
+
+    def img(P, accepted, reached):
+        return Imagination(modes, np.zeros((B, 2, 2)), np.zeros((B, 2)), np.zeros((B, 1, 3)), z, z,
+                           np.array(P, float), z, z, z, np.array([0.0, -1.0, 0.1, 0.2, 0.3, 0.4]), np.ones(B, bool),
+                           np.array(accepted, bool), params_stall=(0.075, np.array(reached, bool)))
+
+    a = img([0.2, 0.074, 0.076, 0.2, 0.2, 0.0], [True, True, True, True, False, True], [False] * 6)
+    assert a.viable.tolist() == [True, False, True, True, False, True]
+    b = img([0.01, 0.0, 0.0, 0.0, 0.0, 0.0], [True] * 5 + [False], [True] + [False] * 5)   # GOAL arrives
+    assert b.viable.tolist() == [True, False, False, False, False, False]
+    s = BehaviorSelector(P)
+    assert s.select(0.0, a).mode == "GOAL"       # PASS-L has the lowest J but is frozen
+    c = img([0.0] * 6, [True] * 5 + [False], [False] * 6)
+    assert s.select(0.5, c).mode == "REVERSE"

@@ -1,0 +1,176 @@
+"""Speed along a candidate: the CBF speed governor of BIG-CBF's behavior policies.
+
+**What the paper leaves open.** Eq. (8) (``eq:behavior_feedback``) drives each behavior towards its subgoal at up to
+a "behavior-dependent speed limit" v_b^max, and Eq. (9) (``eq:behavior_rollout``) imagines every candidate with that
+command; the paper does not say how fast a behavior should move near obstacles, nor what the imagination assumes
+the hard CBF will do there. Taken literally (v_b^max = 0.8 m/s for GOAL and PASS, 0.55 m/s for SIDE, everywhere),
+every candidate is imagined at full speed. The shared radius m_i of Eq. (15) grows with the command through
+tau95 ||R(A u + d) - v_i|| and e_exec(u): with the calibrated tau95 = 0.21 s it is about 0.17 m larger at 0.8 m/s
+than at rest. In a 0.9 m gap between two posts the robot's centre is 0.45 m from each surface, while r_R + d0 + m_i
+is about 0.47 m at full speed and 0.30 m at rest: every full-speed candidate is rejected by Eq. (16)
+(``eq:behavior_acceptance``) ~0.1 m before the narrowest point, the reverse-release fallback fires, and the robot
+repeats this. The execution filter has the same blind spot: it evaluates D_i^exec at u_in (Sec. III-C) and holds
+it fixed, so a full-speed u_in makes the gap infeasible for the filter too, while the same gap at 0.3 m/s is wide.
+
+**Our choice: the speed along a candidate is the one that makes the most progress once the common CBF has acted
+on it.** For the policy's world velocity v_b (Eq. 8, direction kept) and a scale s on ``GOVERNOR_GRID``
+(1, 0.9, ..., 0.1, 0), the command s u_b (u_b = R^T v_b) is checked against the CBF condition of Eq. (18)
+(``eq:cbf_condition``) of every obstacle, with D_i^exec (Eqs. 14-15, kappa_exec) evaluated at that command, exactly
+as the execution filter evaluates it. In the realized velocity w (Eq. 1: w(s) = R(theta)(A s u_b + d)) each row is
+a half-plane,
+
+    gamma_i = 2 q_i^T (w - v_i) + alpha (||q_i||^2 - D_i(s u_b)^2) >= 0
+            <=>  n_i^T w >= n_i^T v_i - alpha h_i(s) / (2 ||q_i||),     n_i = q_i / ||q_i||,
+
+and the filter model (:func:`filter_model`) is the filter's QP in 2-D: the Euclidean projection of w(s) onto the
+``MODEL_ROWS`` most violated half-planes, within the speed disk v_max. Its output w*(s) is what the filter would let
+the robot do. The governed scale is
+
+    s* = argmax_s  [ e_b^T w*(s) - ||w*(s) - w(s)|| ]       (e_b = v_b / ||v_b||; near-ties to the smaller s),
+
+the progress along the behavior's direction after the filter, less the filter's correction: a command the filter
+only slows is worth its admissible part; one it bends sideways is worth the progress the sliding keeps, minus the
+bend. With one row dead ahead this is the largest admissible grid scale (the robot slows down before the obstacle
+instead of running into its inflated radius); with a row at an angle it can be full speed, sliding along the row
+(tests/control/test_control_governor.py works both out by hand). The governed command is s* u_b; in the rollout
+(Eq. 9) the robot moves with w*(s*), the filter model's velocity, while the scores (Eq. 10: W, F, S) and the
+acceptance (Eq. 16) use the governed command.
+
+Why this is principled (it holds in scenes nobody has drawn): it is the speed the filter itself would let this
+direction have, computed with the same formulas (Eqs. 14, 15, 18), the same kappa_exec and the same obstacles, so
+(i) the imagination (Eq. 9) rolls out the command that will actually be executed, and m_i in Eq. (16) is
+evaluated at that speed: a gap is judged by whether the robot can pass it at the speed it will pass it; (ii) where
+the filter would only slow the command down, the executed u_in is already CBF-admissible, so the filter leaves it
+alone and D_i^exec is evaluated at the speed actually driven. A candidate that must slow down
+earns less progress P and, if it must stop, the freezing penalty F (Eq. 10): the speed cost is scored, not hidden.
+
+Scope: the governor is part of BIG-CBF's policies pi_b (GOAL, PASS, SIDE; YIELD commands zero, the REVERSE
+fallback keeps its chosen release velocity), applied identically in the rollout (Eq. 9, with the predicted
+obstacles O^k of Eqs. 2-3) and at every control tick (Eq. 5). BIG-CBF-NoShared shares the policies, so it shares the
+governor (its ablation stays in the imagination's margin). CBF-only and the baselines are untouched: their
+commands are their own. It uses every obstacle the policy sees (all tracks and wall points), a superset of the
+filter's rows (``cbf.select_constraints``), so it is never less conservative than the filter. It is an option,
+off by default: ``StackParams.speed_governor = true`` (``[stack]`` of a run configuration) switches it on together
+with the selection's viability test and the release outlook (docs/fidelity.md, "Liveness"), which it needs; on the
+nine paper scenes it is worse than the paper's reading (measured there). No QP solver is called: 11 scales, each
+with a closed-form 2-D projection, for all candidates and steps at once.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..params.stack import StackParams
+from ..types import Obstacles, RobotState
+from .uncertainty import lambda_max_2x2
+
+#: the scales s tried, largest first [-]
+GOVERNOR_GRID = np.linspace(1.0, 0.0, 11)
+#: rows of the filter model: the most violated ones at each scale [-]
+MODEL_ROWS = 4
+_TINY = 1e-12
+_FEAS = 1e-9
+
+
+def _pair_solve(n1, l1, n2, l2):
+    """The point w (complex) with Re(conj(n1) w) = l1 and Re(conj(n2) w) = l2 (nan where the lines are parallel)."""
+    det = n1.real * n2.imag - n1.imag * n2.real
+    ok = np.abs(det) > 1e-9
+    det = np.where(ok, det, 1.0)
+    x = (l1 * n2.imag - l2 * n1.imag) / det
+    y = (n1.real * l2 - n2.real * l1) / det
+    return np.where(ok, x + 1j * y, np.nan + 0j)
+
+
+def filter_model(w0, n, l, v_max: float) -> np.ndarray:
+    """The imagination's model of the common filter (module docstring): the Euclidean projection of realized
+    velocities w0 (...) onto the half-planes Re(conj(n_j) w) >= l_j, j = 1..K (n (..., K) unit normals, l (..., K)),
+    within the speed disk ||w|| <= v_max (the filter's actuator box, approximated), solved exactly in 2-D: the optimum
+    is w0, a projection onto one line, or the intersection of two lines; the closest feasible candidate. If none is
+    feasible (the rows contradict each other), the candidate with the least worst violation, scaled into the disk."""
+    K = n.shape[-1]
+    cands = [w0]
+    for j in range(K):
+        cands.append(w0 + np.maximum(l[..., j] - (n[..., j].real * w0.real + n[..., j].imag * w0.imag), 0.0) * n[..., j])
+    for j in range(K):
+        for k in range(j + 1, K):
+            cands.append(_pair_solve(n[..., j], l[..., j], n[..., k], l[..., k]))
+    C = np.stack(cands, -1)                                                    # (..., Nc)
+    finite = np.isfinite(C)
+    Cz = np.where(finite, C, 0j)
+    viol = (l[..., None, :] - (n[..., None, :].real * Cz[..., :, None].real
+                               + n[..., None, :].imag * Cz[..., :, None].imag)).max(-1)   # (..., Nc)
+    viol = np.where(finite, viol, np.inf)
+    dist = np.abs(Cz - w0[..., None])
+    feasible = (viol <= _FEAS) & (np.abs(Cz) <= v_max + 1e-9)
+    key = np.where(feasible, dist, np.inf)
+    best = np.argmin(key, -1)
+    none = ~feasible.any(-1)
+    best = np.where(none, np.argmin(viol, -1), best)
+    w = np.take_along_axis(Cz, best[..., None], -1)[..., 0]
+    return w * np.minimum(1.0, v_max / np.maximum(np.abs(w), _TINY))
+
+
+def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
+    """The governor (module docstring; Eq. (18) ``eq:cbf_condition`` with D_i of Eqs. (14)-(15)
+    ``eq:shared_barrier``/``eq:uncertainty_margin``) on complex planar vectors, for B robot states at once.
+
+    p (B,) positions, rot (B,) e^{i theta}, u (B,) body commands u_x + i u_y of Eq. (8) (u_w = 0), obs_p (M,)
+    obstacle positions, obs_v (M,) velocities, obs_sig (M,) beta sqrt(lambda_max(Sigma_i)) [m], obs_r (M,) radii.
+    Returns the scale s* (B,) and the filter model's realized velocity w* (B,) of the governed command s* u.
+    """
+    p, rot, u = np.asarray(p, complex), np.asarray(rot, complex), np.asarray(u, complex)
+    B = p.shape[0]
+    unc, ex = params.uncertainty, params.uncertainty.execution
+    A = np.asarray(ex.A, float)
+    a_c = complex(A[0, 0] + A[1, 1], A[1, 0] - A[0, 1]) / 2
+    b_c = complex(A[0, 0] - A[1, 1], A[1, 0] + A[0, 1]) / 2
+    Rd = rot * complex(ex.d[0], ex.d[1])                                       # R d (B,)
+    L = rot * (a_c * u + b_c * np.conj(u))                                     # R A u (B,): w(s) = s L + R d
+    M = np.shape(obs_r)[0]
+    if M == 0:
+        return np.ones(B), L + Rd
+    S = GOVERNOR_GRID
+    W0 = S[None, :] * L[:, None] + Rd[:, None]                                 # (B, S)
+    q = (p[:, None] - obs_p)[:, None, :]                                       # (B, 1, M)
+    qn = np.maximum(np.abs(q), _TINY)
+    nrm = q / qn
+    relv = W0[:, :, None] - obs_v                                              # (B, S, M)
+    speed = S[None, :] * np.abs(u)[:, None]                                    # ||s u_xy|| (B, S)
+    e_ex = ex.residual_horizon_s * np.interp(speed, ex.residual_speed_mps, ex.residual_bound_mps)
+    m = unc.tau95_s * np.abs(relv) + obs_sig + (e_ex + unc.e_zoh_m)[:, :, None]     # Eq. (15)
+    D = (unc.r_robot_m + unc.d0_m) + np.asarray(obs_r, float) + unc.kappa_exec * m  # Eq. (14)
+    h = qn * qn - D * D
+    # Eq. (18) in the realized velocity w: Re(conj(n_i) w) >= Re(conj(n_i) v_i) - alpha h_i / (2 ||q_i||)
+    lim = (nrm.real * obs_v.real + nrm.imag * obs_v.imag) - params.alpha_per_s * h / (2.0 * qn)
+    viol = lim - (nrm.real * W0[:, :, None].real + nrm.imag * W0[:, :, None].imag)
+    Kr = min(MODEL_ROWS, M)
+    top = np.argpartition(-viol, Kr - 1, axis=-1)[..., :Kr] if M > Kr else np.broadcast_to(np.arange(M), viol.shape)
+    n_top = np.take_along_axis(np.broadcast_to(nrm, viol.shape), top, -1)
+    l_top = np.take_along_axis(lim, top, -1)
+    w = filter_model(W0, n_top, l_top, params.v_max_mps)                       # (B, S)
+    dirn = L / np.maximum(np.abs(L), _TINY)
+    prog = dirn.real[:, None] * w.real + dirn.imag[:, None] * w.imag          # progress along the behavior (B, S)
+    rows = np.arange(B)
+    corr = np.abs(w - W0)                                # the filter model's correction of each scale's command
+    best = np.argmax(prog - corr - 1e-9 * S[None, :], axis=1)   # net progress; near-ties to the smaller scale
+    s = np.where(np.abs(u) > _TINY, S[best], 1.0)
+    return s, np.where(np.abs(u) > _TINY, w[rows, best], Rd)
+
+
+def obstacle_sigma_term(cov, params: StackParams) -> np.ndarray:
+    """beta sqrt(lambda_max(Sigma_i)) [m] (the obstacle-prediction term of Eq. (15)), for covariances (..., 2, 2)."""
+    return params.uncertainty.beta * np.sqrt(lambda_max_2x2(cov))
+
+
+def govern_command(state: RobotState, obstacles: Obstacles, u, params: StackParams) -> tuple[np.ndarray, float]:
+    """The governed body command s* u (3,) and s* for one robot state (module docstring). ``u`` (3,) is a behavior's
+    body twist from Eq. (8); its yaw rate is scaled with it (the behaviors command none)."""
+    u = np.asarray(u, float).reshape(3)
+    if len(obstacles) == 0 or not params.speed_governor:
+        return u, 1.0
+    op = obstacles.p[:, 0] + 1j * obstacles.p[:, 1]
+    ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
+    s, _ = govern_c(np.array([complex(state.px, state.py)]), np.array([np.exp(1j * state.theta)]),
+                    np.array([complex(u[0], u[1])]), op, ov, obstacle_sigma_term(obstacles.cov, params),
+                    obstacles.r, params)
+    return u * float(s[0]), float(s[0])
