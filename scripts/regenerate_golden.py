@@ -45,7 +45,8 @@ machine: the perturbed runs stand in for it.
       stopped_time_s       0.05 s (blind_corner/apf/3)                         -> 0.15 s
       mode switch times    0                                                   -> one selection period, 0.5 s
       final_goal_dist_m    0.105 m; successful runs ended at most 0.182 m from the goal (eps_g 0.15 m + 0.032 m
-                           of odometry error)                                  -> inside eps_g + 0.1 m
+                           of odometry error)                                  -> inside eps_g + 0.2 m (x3_sim's odometry error: see
+                           ODOMETRY_ALLOWANCE_M)
       trace, per second    [0,1) 1.6e-9, [1,2) 3.5e-9, [2,3) 2.3e-8, [3,4) 2.2e-4, [4] 7.9e-4
                            (required_sidestepping/big-cbf/1 from 2 s on)       -> 3 x each, at least 1e-7
   The 1e-12 runs alone moved the metrics about 10 to 1000 times less (e_cbf 1.5 %, time 0.15 s, trace 1e-10).
@@ -89,8 +90,11 @@ TOLERANCES = {
     "stopped_time_s": (0.15, 0.0),
     "final_goal_dist_m": (0.31, 0.0),        # used only when the golden episode did not succeed
 }
-#: allowance over eps_g for the true final distance of a successful episode: success is judged on odometry
-ODOMETRY_ALLOWANCE_M = 0.1
+#: allowance over eps_g for the true final distance of a successful episode: success is judged on odometry, and
+#: the x3_sim profile's odometry (encoder quantization, wheel-speed noise, a wheel-radius error, a gyro bias) ends
+#: up to 0.164 m off: the largest true final distance over 345 successful episodes of the nine scenes (BIG-CBF
+#: and BIG-CBF-NoShared, seeds 0-19) was 0.314 m with eps_g 0.15 m (0.1 m was measured with exact odometry)
+ODOMETRY_ALLOWANCE_M = 0.2
 
 
 def golden_run(scenario: str, method: str, seed: int, perturb=(0.0, 0.0, 0.0)) -> dict:
