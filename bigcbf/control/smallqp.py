@@ -137,9 +137,13 @@ def gi_solve(Qd, g, N, b, x, act, lam, nact, max_iter):
             it += 1
             if it > max_iter:
                 return FAILED, nact, it
-            m = _kkt(Qd, N, act, nact, p, M, rhs)
-            rhs[m - 1] = 1.0                              # raise n_p^T x at unit rate, the active ones fixed
-            if _solve_dense(M, rhs, m, sol):
+            # with nv independent normals active, n_p is their combination: no primal step exists (the KKT system
+            # is singular; rounding can hide that from the pivot test, and p would overrun act and lam)
+            full = nact >= nv
+            if not full:
+                m = _kkt(Qd, N, act, nact, p, M, rhs)
+                rhs[m - 1] = 1.0                          # raise n_p^T x at unit rate, the active ones fixed
+            if not full and _solve_dense(M, rhs, m, sol):
                 s = b[p]
                 for i in range(nv):
                     s -= N[p, i] * x[i]                   # the step that makes p active

@@ -179,3 +179,67 @@ def test_same_bits_whatever_the_memory_layout():
             args = [at_offset(a, off) for a in (C, l, u_in, Hd, lo, hi)]
             assert smallqp.solve_hard(*args)[1].tobytes() == ref
             assert smallqp.solve_slack(*args, PENALTY)[1].tobytes() == ref_s
+
+
+# A problem from a bench episode (generated world corridor_01000, CBF-only, seed 0): three rows and box bounds
+# active at a vertex, then a fourth row still violated. Before the fix the solver added it to a full active set,
+# wrote past its (3,) arrays and corrupted the heap ("double free or corruption", the worker died).
+_FULL_C = np.array([[-0.9576237096771075, -0.2880159104008851, 0.00191468540611819],
+                    [-0.6749756946719315, -0.7378350269277971, 0.00269900733609825],
+                    [0.3333976410694799, 0.9427821676131166, -0.00279237533644822],
+                    [0.04683393723138622, 0.9988993612018757, -0.00257847123138193],
+                    [-0.5311372385961266, 0.8472845133498044, -0.00147892327947206],
+                    [0.9509666114719982, 0.309287345168722, -0.00196009794382181]])
+_FULL_L = np.array([0.5795147015633134, -0.5580879191315216, -0.14649760359240285,
+                    -0.19529278371065376, -0.4567716632337355, -0.4853596148758686])
+_FULL_U = np.array([0.78630117584654, -0.14741255327260505, 0.0])
+_BOX = (np.ones(3), np.array([-0.8, -0.8, -1.0]), np.array([0.8, 0.8, 1.0]))
+
+
+def test_full_active_set_then_another_violated_row():
+    """The captured problem is infeasible (rows 0 and 5 ask for opposite x-components beyond the box: 0.9576 u_x
+    <= -0.5795 + ... and 0.9510 u_x >= -0.4854 + ...); the hard QP says so and the slack QP's least violation is
+    proxsuite's."""
+    status, _ = smallqp.solve_hard(_FULL_C, _FULL_L, _FULL_U, *_BOX)
+    assert status == smallqp.INFEASIBLE
+    status, u, t = smallqp.solve_slack(_FULL_C, _FULL_L, _FULL_U, *_BOX, PENALTY)
+    ok, ref = proxsuite_qp(_FULL_C, _FULL_L, _FULL_U, *_BOX, slack=True)
+    assert status == smallqp.OK and t > 0
+    assert ok and np.allclose(np.r_[u, t], ref, atol=1e-8)
+
+
+_BOUNDSCHECK_SCRIPT = """
+import numpy as np
+from bigcbf.control import smallqp
+import sys
+sys.path.insert(0, {tests!r})
+from test_smallqp import problem, KINDS, _FULL_C, _FULL_L, _FULL_U, _BOX, PENALTY
+smallqp.solve_hard(_FULL_C, _FULL_L, _FULL_U, *_BOX)
+smallqp.solve_slack(_FULL_C, _FULL_L, _FULL_U, *_BOX, PENALTY)
+rng = np.random.default_rng(7)
+for kind in KINDS:
+    for _ in range(100):
+        C, l, u_in, Hd, lo, hi = problem(rng, kind)
+        smallqp.solve_hard(C, l, u_in, Hd, lo, hi)
+        smallqp.solve_slack(C, l, u_in, Hd, lo, hi, PENALTY)
+for _ in range(300):             # many rows in every direction: vertices reached, more rows still violated
+    n = int(rng.integers(4, 25))
+    C = rng.normal(size=(n, 3)); C[:, 2] *= rng.choice([1e-3, 1.0]); C /= np.linalg.norm(C[:, :2], axis=1)[:, None]
+    l = rng.uniform(-0.6, 0.6, n); u_in = rng.uniform(-1, 1, 3)
+    smallqp.solve_hard(C, l, u_in, *_BOX)
+    smallqp.solve_slack(C, l, u_in, *_BOX, PENALTY)
+print("ok")
+"""
+
+
+def test_no_out_of_bounds_access(tmp_path):
+    """Every kernel access checked (numba's bounds checking, compiled afresh in a subprocess): the captured problem,
+    the six families and random problems with up to 24 rows in every direction."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    r = subprocess.run([sys.executable, "-c", _BOUNDSCHECK_SCRIPT.format(tests=str(Path(__file__).parent))],
+                       env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
