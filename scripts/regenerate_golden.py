@@ -50,6 +50,17 @@ machine: the perturbed runs stand in for it.
       trace, per second    [0,1) 1.6e-9, [1,2) 3.5e-9, [2,3) 2.3e-8, [3,4) 2.2e-4, [4] 7.9e-4
                            (required_sidestepping/big-cbf/1 from 2 s on)       -> 3 x each, at least 1e-7
   The 1e-12 runs alone moved the metrics about 10 to 1000 times less (e_cbf 1.5 %, time 0.15 s, trace 1e-10).
+- Re-measured after the exact QP solver (bigcbf.control.smallqp) replaced proxsuite and the perception changes of
+  issue 13 (scripts/measure_spread.py --seeds 0 1 2 3, 2026-11-24): the fresh one-thread process now gives
+  bit-identical runs for all 12 episodes, blind_corner/apf/0 included (the solver has no alignment-dependent
+  kernels); the perturbations move the golden episodes themselves (required_sidestepping/big-cbf/3,
+  single_person_crossing/cbf-only/1, blind_corner/apf/3) by at most: cbf_active_ratio 0.0159, control_steps 6,
+  qp_infeasible_ratio 0.0078, e_cbf 3.59 of 81.4 (4.4 %; 0.016 absolute on a near-zero e_cbf), min_clearance_m
+  0.0137 m, time_s 0.3 s; the trace 1.5e-9, 7.8e-8, 4.2e-6, 9.1e-3 and 2.0e-2 in seconds 0-4 (the BIG-CBF
+  episode grows fastest). Each tolerance is the larger of the earlier one and 3 x this (cbf_active_ratio 0.048,
+  qp_infeasible_ratio 0.0234, e_cbf 0.048 absolute, the trace 1.3e-5, 0.027 and 0.06 in seconds 2-4). Over
+  all 12 episodes the spread is wider (blind_corner/apf/1: time 2.85 s, e_cbf 16.8 of 28): an episode's
+  spread depends on how close its own decisions are, so the tolerances follow the episodes the test runs.
 - The one-thread process gave bit-identical runs for 17 of 18 episodes; blind_corner/apf/0 differed, which is the
   process effect above (it differs as much with an unrelated environment variable), not the thread count.
 """
@@ -75,7 +86,7 @@ TRACE_S = 4.0
 TRACE_EVERY = 5          # control steps between trace samples (0.25 s)
 #: the trace's tolerance by whole second of its time: 3 x the largest measured difference (module docstring), at
 #: least 1e-7 (the earlier golden values' first 4 s matched to 1e-7 on the machine where their metrics did not)
-TRACE_ATOL = {0: 1e-7, 1: 1e-7, 2: 1e-7, 3: 6.6e-4, 4: 2.4e-3}
+TRACE_ATOL = {0: 1e-7, 1: 1e-7, 2: 1.3e-5, 3: 0.027, 4: 0.06}
 
 #: metric -> (absolute tolerance, relative tolerance): 3 x the largest difference measured over the robust
 #: episodes (module docstring)
@@ -83,9 +94,9 @@ TOLERANCES = {
     "time_s": (1.35, 0.0),
     "sim_time_s": (1.35, 0.0),
     "control_steps": (27, 0.0),
-    "cbf_active_ratio": (0.025, 0.0),
-    "qp_infeasible_ratio": (0.0125, 0.0),
-    "e_cbf": (0.001, 0.255),
+    "cbf_active_ratio": (0.048, 0.0),
+    "qp_infeasible_ratio": (0.0234, 0.0),
+    "e_cbf": (0.048, 0.255),
     "min_clearance_m": (0.057, 0.0),
     "stopped_time_s": (0.15, 0.0),
     "final_goal_dist_m": (0.31, 0.0),        # used only when the golden episode did not succeed
