@@ -39,12 +39,14 @@ def file_sha256(path: str | Path) -> str:
 
 
 def git_commit(root: Path) -> str:
-    """The commit of the checkout holding ``root`` (with ``+dirty`` when files differ from it), or ``unknown``
+    """The commit of the checkout holding ``root`` (with ``+dirty`` when files differ from it, the stack profiles
+    of bigcbf/profiles/stack/ aside: ``make profiles`` writes one before it makes the next), or ``unknown``
     outside a git checkout (an installed wheel)."""
     try:
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10,
                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)",
+                                ":(top,exclude)bigcbf/profiles/stack"], cwd=root,
                                capture_output=True, text=True, timeout=10, check=True).stdout.strip()
         return sha + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
