@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import textwrap
 import tomllib
 import zlib
@@ -823,8 +824,14 @@ def _extent(d: Draft) -> float:
     return _r(max(ax / 1.4, ay / 1.05), 2)
 
 
-def _value(v) -> str:
-    """One TOML value of the generated files' schema: bool, number, string, or an (nested) inline array."""
+def toml_key(k: str) -> str:
+    """A TOML key: bare when it can be, else quoted."""
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+
+
+def toml_value(v) -> str:
+    """One inline TOML value of the scenario files' schema: bool, number, string, (nested) array, inline table (the
+    generated worlds here; the faulted scenes of ``bigcbf.bench.faults``)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float)):
@@ -832,8 +839,13 @@ def _value(v) -> str:
     if isinstance(v, str):
         return json.dumps(v)          # a JSON string is a valid TOML basic string
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{toml_key(k)} = {toml_value(x)}" for k, x in v.items()) + " }"
     raise TypeError(f"cannot write {type(v).__name__} to a scenario file")
+
+
+_value = toml_value
 
 
 def _toml(fam: Family, seed: int, name: str, d: Draft, res: CheckResult, limit: float, attempts: int) -> str:

@@ -99,7 +99,7 @@ def least_squares(u: np.ndarray, v: np.ndarray, axes: np.ndarray) -> tuple[np.nd
     """Eq. (1): A, d minimising sum ||v - (A u + d)||^2 over the identified axes (identity rows elsewhere)."""
     A, d = np.eye(3), np.zeros(3)
     idx = np.flatnonzero(axes)
-    if len(idx) == 0:
+    if len(idx) == 0 or len(u) <= len(idx):          # nothing to fit, or fewer samples than unknowns per row
         return A, d
     X = np.column_stack([u[:, idx], np.ones(len(u))])
     beta, *_ = lstsq(X, v[:, idx])

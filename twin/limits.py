@@ -50,7 +50,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import lstsq
+
+from .execution import least_squares
 
 AXES = ("vx", "vy", "wz")
 
@@ -94,21 +95,6 @@ def saturate(p: np.ndarray, v_max: float | None, lever_m: float) -> np.ndarray:
         return p
     D = rim_demand(p, lever_m)
     return p * np.minimum(1.0, v_max / np.maximum(D, 1e-12))[..., None]
-
-
-def least_squares(u: np.ndarray, v: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (1): A, d minimising sum ||v - (A u + d)||^2 over the identified axes (identity rows elsewhere)."""
-    A, d = np.eye(3), np.zeros(3)
-    idx = np.flatnonzero(axes)
-    if len(idx) == 0 or len(u) <= len(idx):
-        return A, d
-    X = np.column_stack([u[:, idx], np.ones(len(u))])
-    beta, *_ = lstsq(X, v[:, idx])
-    for col, j in enumerate(idx):
-        A[j, :] = 0.0
-        A[j, idx] = beta[:-1, col]
-        d[j] = beta[-1, col]
-    return A, d
 
 
 def _scale(u: np.ndarray, axes: np.ndarray) -> np.ndarray:

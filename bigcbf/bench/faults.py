@@ -38,11 +38,11 @@ and its split the level; ``bigcbf bench --suite faults --split severe`` runs one
 """
 from __future__ import annotations
 
-import json
-import re
 import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from ..worlds import toml_key, toml_value
 
 LEVELS = ("mild", "severe")
 #: the split and family of the shipped scenes themselves (no fault)
@@ -141,28 +141,10 @@ def _is_section(v) -> bool:
     return isinstance(v, list) and bool(v) and all(isinstance(x, dict) and not _is_range(x) for x in v)
 
 
-def _key(k: str) -> str:
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
-
-
-def _inline(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)          # a JSON string is a valid TOML basic string
-    if isinstance(v, list):
-        return "[" + ", ".join(_inline(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_inline(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to a scenario file")
-
-
 def _value(v) -> str:
     if isinstance(v, str) and "\n" in v and "'''" not in v:
         return "'''\n" + v + ("" if v.endswith("\n") else "\n") + "'''"
-    return _inline(v)
+    return toml_value(v)
 
 
 def dumps(doc: dict) -> str:
@@ -176,10 +158,10 @@ def dumps(doc: dict) -> str:
         last_value = max((i for i, (_, v) in enumerate(items) if not _is_section(v)), default=-1)
         for i, (k, v) in enumerate(items):
             if i <= last_value:
-                lines.append(f"{_key(k)} = {_value(v)}")
+                lines.append(f"{toml_key(k)} = {_value(v)}")
         for i, (k, v) in enumerate(items):
             if i > last_value:
-                name = f"{path}.{_key(k)}" if path else _key(k)
+                name = f"{path}.{toml_key(k)}" if path else toml_key(k)
                 for item in ([v] if isinstance(v, dict) else v):
                     lines.extend(["", f"[{name}]" if isinstance(v, dict) else f"[[{name}]]"])
                     table(item, name)
