@@ -46,6 +46,7 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
+from . import kernels
 
 BEHAVIORS: tuple[str, ...] = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")
 REVERSE = "REVERSE"
@@ -237,8 +238,8 @@ def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups
         rv = (release_velocity(p, goal, obs_p, obs_r, params, obs_v) if release_v is None
               else np.broadcast_to(np.asarray(release_v, float).reshape(2), p.shape))
         v = np.where(is_rev[:, None], rv, v)
-    dist = np.hypot(*(np.asarray(goal, float) - p).T)
-    return np.where((dist > params.eps_g_m)[:, None], v, 0.0)
+    dist = kernels.goal_distance(p, goal)
+    return np.where(kernels.outside_goal_region(dist, params.eps_g_m)[:, None], v, 0.0)   # eq:goal_region
 
 
 def body_command(theta, v_world) -> np.ndarray:

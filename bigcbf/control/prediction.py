@@ -5,6 +5,7 @@ import numpy as np
 
 from ..params.stack import UncertaintyParams
 from ..types import Obstacles
+from . import kernels
 
 
 def q_sigma_for(obstacles: Obstacles, unc: UncertaintyParams) -> np.ndarray:
@@ -46,10 +47,7 @@ def age_obstacles(obstacles: Obstacles, age_s: float, fresh_s: float, unc: Uncer
     """
     if age_s <= 0 or len(obstacles) == 0:
         return obstacles
-    cov = obstacles.cov
     stale = age_s - fresh_s
-    if stale > 1e-9:
-        q = q_sigma_for(obstacles, unc)
-        cov = cov + (stale * q)[:, None, None] * np.eye(2)[None, :, :]
-    return Obstacles(obstacles.p + age_s * obstacles.v, obstacles.v, cov, obstacles.r, obstacles.static,
-                     obstacles.ids)
+    p, cov = kernels.advance_obstacles(obstacles.p, obstacles.v, obstacles.cov, q_sigma_for(obstacles, unc), age_s,
+                                       grow_s=stale if stale > 1e-9 else 0.0)
+    return Obstacles(p, obstacles.v, cov, obstacles.r, obstacles.static, obstacles.ids)

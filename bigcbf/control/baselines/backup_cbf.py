@@ -36,7 +36,7 @@ import numpy as np
 from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..uncertainty import nominal_velocity
+from ..kernels import execution_velocity
 from .common import Geometry, clip_command, predict
 from .shield import ShieldPlanner, one_step, rollout
 
@@ -73,7 +73,7 @@ class BackupCbfPlanner(ShieldPlanner):
         p = self.params
         lam = np.asarray(self.backup.blends, float)
         U = (1.0 - lam)[:, None] * u_nom[None, :]                  # u_b = 0
-        v0 = nominal_velocity(state.theta, U, p.uncertainty.execution)
+        v0 = execution_velocity(state.theta, U, p.uncertainty.execution)
         p1 = one_step(state.p[None], state.theta, U, p)
         pred = predict(obstacles, p, t0_s=p.T_C_s)
         ro = rollout(p1, v0, state.theta, brake_policy, pred, p, self.backup.a_brake_mps2,

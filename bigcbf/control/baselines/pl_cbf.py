@@ -38,7 +38,7 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import goal_basis, release_velocity
-from ..uncertainty import nominal_velocity
+from ..kernels import execution_velocity
 from .common import Geometry, body_from_world, clip_command, predict, world_velocity
 from .shield import ShieldPlanner, one_step, rollout
 
@@ -105,7 +105,7 @@ class PlCbfPlanner(ShieldPlanner):
         L = len(lib)
         # 1) is the state after one step of the nominal certified by some library policy?
         p1 = one_step(state.p, state.theta, u_nom, p)
-        v1 = nominal_velocity(state.theta, u_nom, p.uncertainty.execution)
+        v1 = execution_velocity(state.theta, u_nom, p.uncertainty.execution)
         geo = Geometry(self.pl.margin_m, self.pl.radius_scale)
         ro = rollout(np.tile(p1, (L, 1)), np.tile(v1, (L, 1)), state.theta, lib.policy(p1),
                      predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2, geo)
