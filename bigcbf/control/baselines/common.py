@@ -1,13 +1,13 @@
 """Helpers shared by the comparison methods: the shared prediction (``eq:obs_prop``, ``eq:cov_prop``), rollouts
 under the nominal execution model (``eq:execution``) and each method's own collision barrier h_i = ||q_i||^2 - D_i^2
-along a horizon. The formulas are :mod:`bigcbf.control.kernels`'.
+along a horizon. The formulas are in :mod:`bigcbf.control.kernels`.
 
 Every baseline that looks ahead uses the same constant-velocity obstacle prediction with growing covariance as
 BIG-CBF (``predict_obstacles``; all methods receive identical observations). Their collision geometry is their
 own (:class:`Geometry`): D_i = scale (r_R + r_i) + margin_m, the robot's and the obstacle's radii and the method's
 own safety margin from its source (each module documents its choice). They do *not* plan with the shared
-uncertainty radius m_i of ``eq:uncertainty_margin``: in the paper, sharing that uncertainty with the planning layer is BIG-CBF's
-contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
+uncertainty radius m_i of ``eq:uncertainty_margin``: in the paper, sharing that uncertainty with the planning layer is
+BIG-CBF's contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
 """
 from __future__ import annotations
 
@@ -44,7 +44,8 @@ class Geometry:
 
 @dataclass(frozen=True)
 class Prediction:
-    """O^k for k = 0..K (Eqs. 2-4): p (K+1, M, 2) [m], cov (K+1, M, 2, 2) [m^2], v (M, 2) [m/s], r (M,) [m]."""
+    """O^k for k = 0..K (eq:obs_prop, eq:cov_prop, eq:predicted_obstacles): p (K+1, M, 2) [m], cov (K+1, M, 2, 2)
+    [m^2], v (M, 2) [m/s], r (M,) [m]."""
 
     p: np.ndarray
     cov: np.ndarray

@@ -14,8 +14,8 @@ own geometry below):
 * RELEASE: the reverse-release law of BIG-CBF's fallback (:func:`release_velocity`, closed loop: regenerated
   from the rollout's position and the predicted obstacles at every step).
 
-At every control tick: u_nom = the GOAL feedback law (Eq. 8). The library is rolled out from the state after
-one control step of u_nom (velocity that of u_nom, obstacles predicted from T_C). If at least one policy is
+At every control tick: u_nom = the GOAL feedback law (eq:behavior_feedback). The library is rolled out from the
+state after one control step of u_nom (velocity that of u_nom, obstacles predicted from T_C). If at least one policy is
 safe there (min h >= 0), u_nom is executed (mode NOMINAL). Otherwise the library is rolled out from the current
 state (current measured velocity) and the certified policy with the best value is executed (its first command;
 mode = its name). Value = goal progress of the rollout, ||p_0 - p_g|| - ||p_K - p_g|| [m], ties to the larger

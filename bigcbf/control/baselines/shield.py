@@ -76,9 +76,10 @@ def one_step(p: np.ndarray, theta: float, u_body: np.ndarray, params: StackParam
 
 
 class ShieldPlanner:
-    """What the policy shields share: at every control tick the nominal input is the GOAL feedback law (Eq. 8
-    with b = GOAL, as for CBF-only) and ``shield`` decides what to send instead; zero inside the goal region.
-    Deterministic (``reset`` ignores the seed); ``last_h_min`` keeps the latest rollouts' worst barrier values."""
+    """What the policy shields share: at every control tick the nominal input is the GOAL feedback law
+    (eq:behavior_feedback with b = GOAL, as for CBF-only) and ``shield`` decides what to send instead; zero inside the
+    goal region. Deterministic (``reset`` ignores the seed); ``last_h_min`` keeps the latest rollouts' worst barrier
+    values."""
 
     name = ""
 
