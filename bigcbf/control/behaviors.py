@@ -245,9 +245,7 @@ def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups
 
 def body_command(theta, v_world) -> np.ndarray:
     """u = [R(theta)^T v, 0] (B, 3): the body twist realizing a world-frame velocity (yaw not commanded)."""
-    v = np.atleast_2d(np.asarray(v_world, float))
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], np.zeros(len(v))], -1)
+    return kernels.body_from_world(theta, np.atleast_2d(np.asarray(v_world, float)))
 
 
 def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams,

@@ -40,6 +40,14 @@ def execution_velocity(theta, u, model: ExecutionModel) -> np.ndarray:
     return np.stack([c * body[..., 0] - s * body[..., 1], s * body[..., 0] + c * body[..., 1]], -1)
 
 
+def body_from_world(theta, v_world) -> np.ndarray:
+    """The body twist u = [R(theta)^T v, 0] (..., 3) that asks for the world-frame velocity v (..., 2) (yaw rate 0):
+    ``eq:execution`` inverted for A = I, d = 0 (the behaviors and the baselines command world velocities)."""
+    v = np.asarray(v_world, float)
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], np.zeros(v.shape[:-1])], -1)
+
+
 def execution_yaw_rate(u, model: ExecutionModel) -> np.ndarray:
     """``eq:execution`` (1), rotational row: the realized yaw rate (A u + d)_wz = u A[2]^T + d_wz [rad/s], (...,)."""
     A, d = np.asarray(model.A, float), np.asarray(model.d, float)

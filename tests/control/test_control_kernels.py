@@ -129,3 +129,11 @@ def test_compiled_mppi_rollout_matches_euler_paths():
     U = np.stack([c * Vs[..., 0] + s * Vs[..., 1], -s * Vs[..., 0] + c * Vs[..., 1], np.zeros((S, N))], -1)
     p, _ = K.euler_paths(np.array([0.5, -0.5]), theta0, U, dt, SLIP)
     np.testing.assert_allclose(paths, p, rtol=0, atol=1e-12)
+
+
+def test_body_from_world_inverts_the_ideal_execution():
+    # R(pi/2)^T (0, 1) = (1, 0); and eq:execution with A = I, d = 0 maps it back
+    np.testing.assert_allclose(K.body_from_world(np.pi / 2, np.array([0.0, 1.0])), [1.0, 0.0, 0.0], atol=1e-15)
+    rng = np.random.default_rng(5)
+    th, v = rng.uniform(-np.pi, np.pi, 20), rng.uniform(-1, 1, (20, 2))
+    np.testing.assert_allclose(K.execution_velocity(th, K.body_from_world(th, v), ExecutionModel()), v, atol=1e-15)

@@ -20,6 +20,7 @@ from ...types import Obstacles, RobotState
 from ..planner import clip_command  # noqa: F401  (re-exported for the baselines)
 from ..prediction import predict_obstacles, q_sigma_for
 from .. import kernels
+from ..kernels import body_from_world  # noqa: F401  (re-exported for the baselines)
 from ..uncertainty import barrier, rotation
 
 _TINY = 1e-12
@@ -80,13 +81,6 @@ def integrate(state: RobotState, u: np.ndarray, dt: float, params: StackParams,
     p0 = state.p if p0 is None else np.asarray(p0, float)
     theta0 = state.theta if theta0 is None else float(theta0)
     return kernels.euler_paths(p0, theta0, u, dt, params.uncertainty.execution)
-
-
-def body_from_world(theta, v_world) -> np.ndarray:
-    """u = [R(theta)^T v, 0] (..., 3) for world-frame velocities v (..., 2) (yaw rate 0)."""
-    v = np.asarray(v_world, float)
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], np.zeros(v.shape[:-1])], -1)
 
 
 def world_velocity(state: RobotState) -> np.ndarray:
