@@ -243,7 +243,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             vreal[gr] = w_gov
         p = kernels.euler_step(p, vreal, dt)
         if turning:
-            th = th + dt * (a20 * u.real + a21 * u.imag + dw)
+            th = kernels.euler_step(th, kernels.execution_yaw_rate_c(u, a20, a21, dw), dt)
             THk[k + 1] = th
             rot = np.exp(1j * th)
             conj_rot = np.conj(rot)

@@ -70,6 +70,12 @@ def execution_velocity_c(rot, u, a: complex, b: complex, d: complex) -> np.ndarr
     return rot * (a * u + b * np.conj(u) + d)
 
 
+def execution_yaw_rate_c(u, a20: float, a21: float, d_w: float):
+    """``eq:execution`` (1), rotational row, for complex commands u = u_x + i u_y (u_w = 0): a20 u_x + a21 u_y + d_w
+    [rad/s] with a20 = A[2, 0], a21 = A[2, 1], d_w = d[2]."""
+    return a20 * u.real + a21 * u.imag + d_w
+
+
 def euler_step(p, v, dt):
     """One forward-Euler step of the robot's position under eq:execution (1): p + dt v (real (..., 2) or complex)."""
     return p + dt * v

@@ -137,3 +137,11 @@ def test_body_from_world_inverts_the_ideal_execution():
     rng = np.random.default_rng(5)
     th, v = rng.uniform(-np.pi, np.pi, 20), rng.uniform(-1, 1, (20, 2))
     np.testing.assert_allclose(K.execution_velocity(th, K.body_from_world(th, v), ExecutionModel()), v, atol=1e-15)
+
+
+def test_yaw_rate_complex_form_by_hand():
+    # A[2] = (0.05, -0.02, 1), d_w = 0.05: 0.05*0.5 - 0.02*0.2 + 0.05 = 0.071 (u_w = 0), as the real form gives
+    A = np.asarray(SLIP.A, float)
+    w = K.execution_yaw_rate_c(np.array([0.5 + 0.2j]), A[2, 0], A[2, 1], SLIP.d[2])
+    np.testing.assert_allclose(w, [0.071], atol=1e-15)
+    np.testing.assert_allclose(w, K.execution_yaw_rate(np.array([[0.5, 0.2, 0.0]]), SLIP), atol=1e-15)
