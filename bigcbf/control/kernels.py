@@ -14,8 +14,16 @@ reference functions of ``uncertainty``) and a complex one (planar vectors as x +
 by e^{i theta}; the imagination's rollout and the governor, which advance every behavior at once). They agree to
 rounding, not bit for bit (tests/control/test_control_kernels.py), so each caller keeps the form it always used.
 
-The compiled CBF row kernel (``cbf._rows_kernel``, numba) inlines eq:uncertainty_margin and eq:shared_barrier
-in its loop (a per-obstacle scalar loop cannot call numpy functions); the tests check it against these kernels.
+Copies left on purpose, each checked against these kernels in tests/control/test_control_kernels.py:
+
+- ``cbf._rows_kernel`` and ``baselines.mppi._rollout_costs`` (numba) inline eq:execution, eq:uncertainty_margin,
+  eq:shared_barrier and the Euler rollout in per-obstacle / per-sample scalar loops (compiled code cannot call these
+  numpy functions; the CBF rows sum D_i as (r_R + d0) + r_i + kappa m, equal to :func:`inflated_radius` to rounding).
+- ``governor.govern_c`` keeps that (r_R + d0) + r_i order too (it models the filter) and writes the realized velocity
+  as s R A u + R d over its speed grid (the linear part scaled), which is not :func:`execution_velocity_c`'s
+  R (A u + d) bit for bit.
+- The simulator's hardware layer (``bigcbf.sim.firmware``) is the plant, not the model: eq:execution with the residual,
+  3-axis, with latency and limits.
 
 Pure numpy; no state. Broadcasting over leading axes everywhere.
 """
