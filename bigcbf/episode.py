@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .control.cbf import CbfFilter
+from .control.kernels import goal_distance, in_goal_region
 from .control.methods import make_planner
 from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
@@ -201,7 +202,7 @@ class Episode:
                     self.metrics.scan(None)
             if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
-                if np.hypot(state.px - self.goal[0], state.py - self.goal[1]) <= self.params.eps_g_m:
+                if in_goal_region(goal_distance(state.p, self.goal), self.params.eps_g_m):   # eq:goal_region
                     self._success = self.done = True
                     return
                 self.state = state

@@ -1,33 +1,32 @@
-"""The six feedback behaviors of BIG-CBF and the reverse-release fallback (Eqs. 5-8).
+"""The six feedback behaviors of BIG-CBF and the reverse-release fallback (eq:online_behavior_command, eq:goal_basis,
+eq:behavior_subgoals, eq:behavior_feedback).
 
-Modes: GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD (the behavior set B), plus REVERSE, the fallback used when
-every regular behavior is rejected. A policy maps (robot position, obstacles, goal) to a world-frame
-translational velocity v_b (Eq. 8); the body command is u = [R(theta)^T v_b, 0]: the behaviors are purely
-translational (holonomic base, 360 degree LiDAR), yaw is not commanded.
+Modes: GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD (the behavior set B), plus REVERSE, the fallback used when every
+regular behavior is rejected. A policy maps (robot position, obstacles, goal) to a world-frame translational velocity
+v_b (eq:behavior_feedback); the body command is u = [R(theta)^T v_b, 0]: the behaviors are purely translational
+(holonomic base, 360 degree LiDAR), yaw is not commanded.
 
 Choices the paper leaves open (documented here, parameters in StackParams):
 
-* Locally relevant obstacle i of Eq. (7): seen from the robot along the goal direction d_g, with along-track
-  distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest s_i)
-  obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead
-  (s_i - r_i < ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + d_pass_min, i.e. driving straight
-  to the goal would bring the footprint closer than d0 + d_pass_min to it. Wall points (radius 0) take part like
-  any obstacle.
-* d_pass of Eq. (7), per side sigma: the lateral shift that puts the robot's footprint, with Eq. (7)'s 0.35 m
-  clearance, beside the relevant obstacle's *group* on side sigma,
-  d_pass = max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of
-  obstacles connected to i by gaps the robot cannot pass through (gap < 2 (r_R + d0) + 0.1 m; see
-  :func:`obstacle_groups`). The paper's scenes are circles, where G(i) = {i} and the offset is
-  max(d_pass_min, sigma c_i + r_i + r_R + 0.35), i.e. Eq. (7)'s floor r_R + r_i + 0.35 for an obstacle dead
-  ahead, widened for one offset towards side sigma. A LiDAR sees a wide obstacle or a wall as many points of
-  radius 0: without the group, PASS would aim 0.5 m beside the nearest point of a 2.5 m wide obstacle and run
-  into it; with it, PASS aims past the structure's end on its side.
+* Locally relevant obstacle i of eq:behavior_subgoals: seen from the robot along the goal direction d_g, with
+  along-track distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest s_i)
+  obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead (s_i - r_i <
+  ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + d_pass_min, i.e. driving straight to the goal would
+  bring the footprint closer than d0 + d_pass_min to it. Wall points (radius 0) take part like any obstacle.
+* d_pass of eq:behavior_subgoals, per side sigma: the lateral shift that puts the robot's footprint, with
+  eq:behavior_subgoals's 0.35 m clearance, beside the relevant obstacle's *group* on side sigma, d_pass =
+  max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of obstacles connected to i
+  by gaps the robot cannot pass through (gap < 2 (r_R + d0) + 0.1 m; see :func:`obstacle_groups`). The paper's scenes
+  are circles, where G(i) = {i} and the offset is max(d_pass_min, sigma c_i + r_i + r_R + 0.35), i.e.
+  eq:behavior_subgoals's floor r_R + r_i + 0.35 for an obstacle dead ahead, widened for one offset towards side sigma. A
+  LiDAR sees a wide obstacle or a wall as many points of radius 0: without the group, PASS would aim 0.5 m beside the
+  nearest point of a 2.5 m wide obstacle and run into it; with it, PASS aims past the structure's end on its side.
 * Without a relevant obstacle there is nothing to pass: PASS-sigma keeps only its goal-directed component
   (g = p + 0.85 d_g), so a robot that has completed a pass heads for the goal instead of drifting sideways; a
   PASS mode and GOAL then differ only near the goal, where the selection prefers GOAL (PASS overshoots).
 * YIELD (zero command) is a candidate only while a dynamic obstacle is tracked ("YIELD intentionally suppresses
   movement when dynamic obstacles are present"); in a static scene standing still would never resolve anything.
-* Inside the goal region (Eq. 5 of Sec. II, ||p - p_g|| <= eps_g) every policy commands zero.
+* Inside the goal region (eq:goal_region, ||p - p_g|| <= eps_g) every policy commands zero.
 * REVERSE (reverse-release fallback): a constant world-frame release velocity ``release_v`` chosen by the
   imagination when the fallback is invoked (:func:`bigcbf.control.imagination.choose_release`) from a predefined
   fan of candidates: the *push* (below), straight back from the goal, seven more headings 45 degrees apart
@@ -46,28 +45,30 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
+from . import kernels
 
 BEHAVIORS: tuple[str, ...] = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")
 REVERSE = "REVERSE"
 MODES: tuple[str, ...] = BEHAVIORS + (REVERSE,)
 MODE_INDEX = {m: i for i, m in enumerate(MODES)}
 
-# Eq. (7) coefficients per mode index (GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD, REVERSE)
+# eq:behavior_subgoals coefficients per mode index (GOAL, PASS-L, PASS-R, SIDE-L, SIDE-R, YIELD, REVERSE)
 FORWARD_M = np.array([0.0, 0.85, 0.85, 0.45, 0.45, 0.0, 0.0])   # along d_g [m]
 SIGMA = np.array([0.0, 1.0, -1.0, 1.0, -1.0, 0.0, 0.0])         # +1 left, -1 right
 IS_GOAL = np.array([True, False, False, False, False, False, False])
 IS_PASS = np.array([False, True, True, False, False, False, False])
 IS_SIDE = np.array([False, False, False, True, True, False, False])
-SIDE_LATERAL_M = 0.80          # Eq. (7) SIDE lateral offset [m]
-PASS_EXTRA_M = 0.35            # Eq. (7) PASS floor r_R + r_i + 0.35 [m]
-GAIN_NEAR_PER_S = 2.0          # Eq. (8) (2 1/s) ||e_b||
-GAIN_LIN_PER_S = 0.35          # Eq. (8) (0.35 1/s) e_b
+SIDE_LATERAL_M = 0.80          # eq:behavior_subgoals SIDE lateral offset [m]
+PASS_EXTRA_M = 0.35            # eq:behavior_subgoals PASS floor r_R + r_i + 0.35 [m]
+GAIN_NEAR_PER_S = 2.0          # eq:behavior_feedback (2 1/s) ||e_b||
+GAIN_LIN_PER_S = 0.35          # eq:behavior_feedback (0.35 1/s) e_b
 _TINY = 1e-12
 RELEASE_MOVING_MPS = 0.2       # obstacles faster than this are released from sideways (see REVERSE above)
 
 
 def speed_limits(params: StackParams) -> np.ndarray:
-    """v_b^max per mode index [m/s] (Eq. 8): 0.8 for GOAL/PASS, 0.55 for SIDE, 0 for YIELD, release speed."""
+    """v_b^max per mode index [m/s] (eq:behavior_feedback): 0.8 for GOAL/PASS, 0.55 for SIDE, 0 for YIELD, release
+    speed."""
     v, vs = params.v_max_mps, params.v_side_mps
     return np.array([v, v, v, vs, vs, 0.0, params.v_release_mps])
 
@@ -77,7 +78,7 @@ def mode_indices(modes) -> np.ndarray:
 
 
 def goal_basis(p, goal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eq. (6): d_g = (p_g - p)/||p_g - p||, n_g = [-d_g,y, d_g,x] (left normal). Returns d_g, n_g (..., 2) and
+    """eq:goal_basis: d_g = (p_g - p)/||p_g - p||, n_g = [-d_g,y, d_g,x] (left normal). Returns d_g, n_g (..., 2) and
     the distance ||p_g - p|| (...). At the goal itself d_g = 0."""
     e = np.asarray(goal, float) - np.asarray(p, float)
     dist = np.hypot(e[..., 0], e[..., 1])
@@ -113,7 +114,7 @@ def group_extent(sigma, j, c, obs_r, groups) -> np.ndarray:
 
 
 def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_offsets: bool = False):
-    """The locally relevant obstacle of Eq. (7) for each row (see the module docstring).
+    """The locally relevant obstacle of eq:behavior_subgoals for each row (see the module docstring).
 
     p, d_g, n_g (B, 2); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none, c_i (B,), r_i (B,)),
     c_i and r_i being 0 where there is none; with ``with_offsets`` also the cross-track offsets c (B, M).
@@ -139,7 +140,7 @@ def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_of
 
 
 def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
-    """Eq. (7) lateral PASS offset max(d_pass, r_R + r_i + 0.35) [m], with d_pass = max(d_pass_min,
+    """eq:behavior_subgoals lateral PASS offset max(d_pass, r_R + r_i + 0.35) [m], with d_pass = max(d_pass_min,
     extent + r_R + 0.35), ``extent`` being the group's reach towards the side (:func:`group_extent`; for a lone
     obstacle sigma c_i + r_i); 0 without a relevant obstacle."""
     unc = params.uncertainty
@@ -148,7 +149,7 @@ def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
 
 
 def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
-    """Eq. (7): e_b = g_b - p (B, 2) for each row's mode:
+    """eq:behavior_subgoals: e_b = g_b - p (B, 2) for each row's mode:
     GOAL p_g - p; PASS-sigma 0.85 d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a relevant
     obstacle); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
     YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
@@ -169,7 +170,7 @@ def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=N
 
 
 def feedback_velocity(e, v_max) -> np.ndarray:
-    """Eq. (8): v_b = sat_{v_max}[ e/||e|| min(v_max, 2||e||) + 0.35 e ] (world frame, m/s).
+    """eq:behavior_feedback: v_b = sat_{v_max}[ e/||e|| min(v_max, 2||e||) + 0.35 e ] (world frame, m/s).
 
     Both terms are parallel to e, so v_b = e/||e|| min(v_max, min(v_max, 2||e||) + 0.35||e||). e (B, 2), v_max (B,).
     """
@@ -226,7 +227,8 @@ def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> 
 
 def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None,
                     release_v=None) -> np.ndarray:
-    """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (Eqs. 6-8), zero inside the
+    """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (eq:goal_basis,
+    eq:behavior_subgoals, eq:behavior_feedback), zero inside the
     goal region; REVERSE rows use the fallback: ``release_v`` (2,) when given, else the push."""
     mode_idx = np.asarray(mode_idx, int)
     p = np.atleast_2d(np.asarray(p, float))
@@ -237,20 +239,19 @@ def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups
         rv = (release_velocity(p, goal, obs_p, obs_r, params, obs_v) if release_v is None
               else np.broadcast_to(np.asarray(release_v, float).reshape(2), p.shape))
         v = np.where(is_rev[:, None], rv, v)
-    dist = np.hypot(*(np.asarray(goal, float) - p).T)
-    return np.where((dist > params.eps_g_m)[:, None], v, 0.0)
+    dist = kernels.goal_distance(p, goal)
+    return np.where(kernels.outside_goal_region(dist, params.eps_g_m)[:, None], v, 0.0)   # eq:goal_region
 
 
 def body_command(theta, v_world) -> np.ndarray:
     """u = [R(theta)^T v, 0] (B, 3): the body twist realizing a world-frame velocity (yaw not commanded)."""
-    v = np.atleast_2d(np.asarray(v_world, float))
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], np.zeros(len(v))], -1)
+    return kernels.body_from_world(theta, np.atleast_2d(np.asarray(v_world, float)))
 
 
 def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                      groups=None, release_v=None) -> np.ndarray:
-    """Eq. (5): u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest estimates (3,).
+    """eq:online_behavior_command: u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest
+    estimates (3,).
     ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given;
     ``release_v``: the REVERSE fallback's chosen world velocity (2,) (the push when None)."""
     if mode not in MODE_INDEX:

@@ -1,13 +1,13 @@
-"""The hard CBF execution filter, eq:cbf_condition and eq:hard_cbf_qp (Eqs. (18)-(19)): minimum-intervention QP.
+"""The hard CBF execution filter, eq:cbf_condition and eq:hard_cbf_qp: minimum-intervention QP.
 
 For each obstacle i selected for the filter, D_i^exec = r_R + r_i + d0 + kappa_exec m_i(u_in) (eq:shared_barrier,
-eq:uncertainty_margin; Eqs. 14-15) is evaluated from the incoming command and held fixed during the solve, which
-makes the CBF condition of eq:cbf_condition (Eq. 18)
+eq:uncertainty_margin) is evaluated from the incoming command and held fixed
+during the solve, which makes the CBF condition of eq:cbf_condition
 
     2 q_i^T [R(theta)(A u + d) - v_i] + alpha h_i^exec >= 0
 
 affine in u: a_i^T u >= b_i with a_i = 2 A_xy^T R(theta)^T q_i and b_i = -2 q_i^T (R(theta) d_xy - v_i) - alpha h_i.
-Rows are normalized by ||a_i|| (the violation is then in m/s). The QP (eq:hard_cbf_qp, Eq. 19) is
+Rows are normalized by ||a_i|| (the violation is then in m/s). The QP (eq:hard_cbf_qp) is
 
     u_safe = argmin (u - u_in)^T H (u - u_in)   s.t.  a_i^T u >= b_i for all i,  u_min <= u <= u_max.
 
@@ -89,19 +89,20 @@ class FilterInfo:
     D: np.ndarray                # D_i^exec for every obstacle (M,) [m]
     max_violation: float = 0.0   # largest normalized CBF-row violation of u_safe [m/s]
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # obstacle index of each counted row
-    #: kappa_exec m_i (Eq. 14: D_i - r_R - r_i - d0) [m] of the obstacles selected as CBF rows (before rows that
-    #: hold over the whole actuator box are dropped)
+    #: kappa_exec m_i (eq:shared_barrier: D_i - r_R - r_i - d0) [m] of the obstacles selected as CBF rows (before rows
+    #: that hold over the whole actuator box are dropped)
     margins: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fault: str | None = None     # why the step was a perception fault (fallback "perception-fault"), else None
 
 
 @dataclass
 class CbfRows:
-    """Eq. (18) for every obstacle, normalized: C_i u >= l_i with C_i = a_i / ||a_i||, l_i = b_i / ||a_i||, where
-    a_i = 2 A_xy^T R(theta)^T q_i and b_i = -2 q_i^T (R(theta) d_xy - v_i) - alpha h_i; plus D^exec, h^exec and
-    q (Eqs. 11-15). ``norm`` = ||a_i||; a row with norm 0 (robot center on the obstacle center) has C_i = 0 and
-    l_i = b_i (it reads 0 >= b_i). ``margin`` = D_i - (r_R + d0) - r_i = kappa_exec m_i [m]; ``plain``: every
-    input number finite and plainly within the fault bounds (``faults._plainly_usable`` and the state's bounds)."""
+    """eq:cbf_condition for every obstacle, normalized: C_i u >= l_i with C_i = a_i / ||a_i||, l_i = b_i / ||a_i||,
+    where a_i = 2 A_xy^T R(theta)^T q_i and b_i = -2 q_i^T (R(theta) d_xy - v_i) - alpha h_i; plus D^exec, h^exec and q
+    (eq:relative_position_error, eq:shared_barrier, eq:uncertainty_margin). ``norm`` =
+    ||a_i||; a row with norm 0 (robot center on the obstacle center) has C_i = 0 and l_i = b_i (it reads 0 >= b_i).
+    ``margin`` = D_i - (r_R + d0) - r_i = kappa_exec m_i [m]; ``plain``: every input number finite and plainly within
+    the fault bounds (``faults._plainly_usable`` and the state's bounds)."""
 
     C: np.ndarray      # (M, 3)
     l: np.ndarray      # (M,)
@@ -166,7 +167,7 @@ def _rows_kernel(px, py, theta, vx, vy, wz, u0, u1, u2, P, V, cov, r, k, Axy, kn
     rot = complex(math.cos(theta), math.sin(theta))
     cols = (complex(Axy[0, 0], Axy[1, 0]) * u0 + complex(Axy[0, 1], Axy[1, 1]) * u1
             + complex(Axy[0, 2], Axy[1, 2]) * u2 + d_c)
-    v_rob = rot * cols                                         # Eq. (1) nominal: R(theta)(A u + d)
+    v_rob = rot * cols                                         # eq:execution nominal: R(theta)(A u + d)
     e_ex = horizon * _interp(math.hypot(u0, u1), knots, bounds)
     rd = rot * d_c
     base = r_robot + d0
@@ -176,13 +177,13 @@ def _rows_kernel(px, py, theta, vx, vy, wz, u0, u1, u2, P, V, cov, r, k, Axy, kn
              and math.hypot(vx, vy) <= max_speed)
     vlim = max_speed / math.sqrt(2.0)
     for i in range(M):
-        qx, qy = px - P[i, 0], py - P[i, 1]                    # q_i = p - p_i (Eq. 11)
+        qx, qy = px - P[i, 0], py - P[i, 1]                    # q_i = p - p_i (eq:relative_position_error)
         Vi = complex(V[i, 0], V[i, 1])
         ca, cc, c01, c10 = cov[i, 0, 0], cov[i, 1, 1], cov[i, 0, 1], cov[i, 1, 0]
         cb = 0.5 * (c01 + c10)
         lam = max(0.5 * (ca + cc) + math.sqrt(0.25 * (ca - cc) ** 2 + cb * cb), 0.0)
-        m = tau * abs(v_rob - Vi) + beta * math.sqrt(lam) + (e_ex + e_zoh)    # Eq. (15)
-        Di = base + r[i] + kappa * m                                          # Eq. (14)
+        m = tau * abs(v_rob - Vi) + beta * math.sqrt(lam) + (e_ex + e_zoh)    # eq:uncertainty_margin
+        Di = base + r[i] + kappa * m                                          # eq:shared_barrier
         q_abs = math.hypot(qx, qy)
         hi = q_abs * q_abs - Di * Di
         c, s = rot.real, rot.imag
@@ -220,9 +221,10 @@ def _f64(a) -> np.ndarray:
 
 
 def cbf_rows(state: RobotState, obstacles: Obstacles, u_ref, params: StackParams) -> CbfRows:
-    """eq:cbf_condition (Eq. 18) as a_i^T u >= b_i for every obstacle, with D_i^exec (eq:shared_barrier, Eq. 14)
-    from m_i (eq:uncertainty_margin, Eq. 15) evaluated at u_ref and held fixed. A compiled kernel that inlines
-    ``uncertainty.uncertainty_radius`` / ``inflated_radius`` / ``barrier`` (the tests check that both agree)."""
+    """eq:cbf_condition as a_i^T u >= b_i for every obstacle, with D_i^exec (eq:shared_barrier)
+    from m_i (eq:uncertainty_margin) evaluated at u_ref and held fixed. A compiled kernel that inlines
+    ``kernels.uncertainty_radius`` / ``inflated_radius`` / ``barrier`` (it sums D_i as (r_R + d0) + r_i + kappa m,
+    the kernel as (r_R + r_i) + d0 + kappa m; tests/control/test_control_kernels.py checks that both agree)."""
     k, Axy, knots, bounds, ident = _consts(params)
     u0, u1, u2 = np.asarray(u_ref, float).reshape(3).tolist()
     C, lv, norm, D, h, q, margin, plain = _rows_kernel(
@@ -339,7 +341,8 @@ def _clip_violation(C, lv, x, lo, hi):
 
 
 class CbfFilter:
-    """The common hard CBF filter (Eqs. 18-19); every method feeds its u_in through the same instance type."""
+    """The common hard CBF filter (eq:cbf_condition, eq:hard_cbf_qp); every method feeds its u_in through the same
+    instance type."""
 
     def __init__(self, params: StackParams):
         self.params = params
@@ -353,8 +356,8 @@ class CbfFilter:
         """A new episode. The filter keeps no state between calls (the exact solver needs no warm start)."""
 
     def _solve_qp(self, C, lvec, u_target, cache: bool = True) -> np.ndarray | None:
-        """Eq. (19), exactly (``smallqp.solve_hard``); None when the solver reports no solution (infeasible, or its
-        iteration limit). ``cache`` is accepted for the callers of the earlier warm-started solver."""
+        """eq:hard_cbf_qp, exactly (``smallqp.solve_hard``); None when the solver reports no solution (infeasible, or
+        its iteration limit). ``cache`` is accepted for the callers of the earlier warm-started solver."""
         status, x = smallqp.solve_hard(C, lvec, u_target, self.Hd, self.lo, self.hi)
         if status != smallqp.OK or not np.isfinite(x).all():
             return None
@@ -371,7 +374,8 @@ class CbfFilter:
         return max(float(viol), 0.0), u
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
-        """Eqs. (18)-(19): the minimum-intervention safe command u_safe (3,) and what the filter did."""
+        """eq:cbf_condition, eq:hard_cbf_qp: the minimum-intervention safe command u_safe (3,) and what the filter
+        did."""
         t0 = time.perf_counter()
         u_in = np.asarray(u_in, float).reshape(3)
         fallback = None

@@ -61,7 +61,7 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
-from .uncertainty import lambda_max_2x2
+from . import kernels
 
 #: the scales s tried, largest first [-]
 GOVERNOR_GRID = np.linspace(1.0, 0.0, 11)
@@ -121,10 +121,8 @@ def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tu
     p, rot, u = np.asarray(p, complex), np.asarray(rot, complex), np.asarray(u, complex)
     B = p.shape[0]
     unc, ex = params.uncertainty, params.uncertainty.execution
-    A = np.asarray(ex.A, float)
-    a_c = complex(A[0, 0] + A[1, 1], A[1, 0] - A[0, 1]) / 2
-    b_c = complex(A[0, 0] - A[1, 1], A[1, 0] + A[0, 1]) / 2
-    Rd = rot * complex(ex.d[0], ex.d[1])                                       # R d (B,)
+    a_c, b_c, d_c = kernels.execution_complex(ex)                             # eq:execution
+    Rd = rot * d_c                                                             # R d (B,)
     L = rot * (a_c * u + b_c * np.conj(u))                                     # R A u (B,): w(s) = s L + R d
     M = np.shape(obs_r)[0]
     if M == 0:
@@ -136,10 +134,12 @@ def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tu
     nrm = q / qn
     relv = W0[:, :, None] - obs_v                                              # (B, S, M)
     speed = S[None, :] * np.abs(u)[:, None]                                    # ||s u_xy|| (B, S)
-    e_ex = ex.residual_horizon_s * np.interp(speed, ex.residual_speed_mps, ex.residual_bound_mps)
-    m = unc.tau95_s * np.abs(relv) + obs_sig + (e_ex + unc.e_zoh_m)[:, :, None]     # Eq. (15)
-    D = (unc.r_robot_m + unc.d0_m) + np.asarray(obs_r, float) + unc.kappa_exec * m  # Eq. (14)
-    h = qn * qn - D * D
+    m = kernels.uncertainty_radius(np.abs(relv), obs_sig, kernels.e_exec_speed(speed, ex)[:, :, None],
+                                   unc)                                        # eq:uncertainty_margin
+    # eq:shared_barrier, summed as the compiled CBF rows sum it ((r_R + d0) + r_i, cbf._rows_kernel), not as
+    # kernels.inflated_radius ((r_R + r_i) + d0): the governor models the filter (equal to rounding)
+    D = (unc.r_robot_m + unc.d0_m) + np.asarray(obs_r, float) + unc.kappa_exec * m
+    h = kernels.barrier(qn * qn, D)
     # Eq. (18) in the realized velocity w: Re(conj(n_i) w) >= Re(conj(n_i) v_i) - alpha h_i / (2 ||q_i||)
     lim = (nrm.real * obs_v.real + nrm.imag * obs_v.imag) - params.alpha_per_s * h / (2.0 * qn)
     viol = lim - (nrm.real * W0[:, :, None].real + nrm.imag * W0[:, :, None].imag)
@@ -158,8 +158,9 @@ def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tu
 
 
 def obstacle_sigma_term(cov, params: StackParams) -> np.ndarray:
-    """beta sqrt(lambda_max(Sigma_i)) [m] (the obstacle-prediction term of Eq. (15)), for covariances (..., 2, 2)."""
-    return params.uncertainty.beta * np.sqrt(lambda_max_2x2(cov))
+    """beta sqrt(lambda_max(Sigma_i)) [m] (the obstacle-prediction term of ``eq:uncertainty_margin``), for
+    covariances (..., 2, 2): ``kernels.prediction_term``."""
+    return kernels.prediction_term(cov, params.uncertainty)
 
 
 def govern_command(state: RobotState, obstacles: Obstacles, u, params: StackParams) -> tuple[np.ndarray, float]:

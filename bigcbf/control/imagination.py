@@ -32,7 +32,8 @@ from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, I
 from .faults import perception_fault
 from .governor import govern_c, obstacle_sigma_term
 from .prediction import predict_obstacles, q_sigma_for
-from .uncertainty import has_dynamic, kappa_img, lambda_max_2x2
+from . import kernels
+from .uncertainty import has_dynamic, kappa_img
 
 _TINY = 1e-12
 
@@ -76,13 +77,6 @@ class Imagination:
         return np.asarray(self.accepted) & ~stalled
 
 
-def _real_linear_as_complex(M2) -> tuple[complex, complex]:
-    """A real 2x2 map as z -> a z + b conj(z) (z = x + i y)."""
-    a = complex(M2[0, 0] + M2[1, 1], M2[1, 0] - M2[0, 1]) / 2
-    b = complex(M2[0, 0] - M2[1, 1], M2[1, 0] + M2[0, 1]) / 2
-    return a, b
-
-
 class _Constants:
     """Per (modes, params) constants of the rollout (Eqs. 1, 7, 8), cached."""
 
@@ -103,11 +97,10 @@ class _Constants:
         self.is_rev = midx == MODE_INDEX[REVERSE]
         self.governed = ~self.is_rev & (midx != MODE_INDEX["YIELD"])     # rows the speed governor applies to
         self.any_rev = bool(self.is_rev.any())
-        # execution model, Eq. (1): body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
+        # execution model, eq:execution: body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
         A = np.asarray(ex.A, float)
         self.A = A
-        self.a_c, self.b_c = _real_linear_as_complex(A[:2, :2])
-        self.d_c = complex(ex.d[0], ex.d[1])
+        self.a_c, self.b_c, self.d_c = kernels.execution_complex(ex)
         self.ideal_xy = self.a_c == 1 and self.b_c == 0 and self.d_c == 0
         self.a20, self.a21, self.dw = float(A[2, 0]), float(A[2, 1]), float(ex.d[2])
         self.turning = not (self.a20 == 0 and self.a21 == 0 and self.dw == 0)
@@ -202,6 +195,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
         g = pg - p
         dist = np.abs(g)
+        outside = kernels.outside_goal_region(dist, eps_g)             # eq:goal_region
         dg = g / np.maximum(dist, _TINY)
         coef = coef0
         if any_pass and M:
@@ -221,14 +215,14 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         for gr in goal_rows:
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
-        v = e * np.minimum(gain, vmax * (dist > eps_g) / np.maximum(np.abs(e), _TINY))
+        v = e * np.minimum(gain, vmax * outside / np.maximum(np.abs(e), _TINY))
         w_gov = None
         if M and govern:     # the governed speed and the filter model's velocity (governor.py)
             gr = gov_rows
             s_gov, w_gov = govern_c(p[gr], rot[gr], v[gr] * conj_rot[gr], Oc[k], obs_vz, sig_k[k], r, params)
             v[gr] = v[gr] * s_gov
         if any_rev and release_v is not None:                        # chosen release velocities
-            v = np.where(is_rev, release_v * (dist > eps_g), v)
+            v = np.where(is_rev, release_v * outside, v)
         elif any_rev:                                                 # reverse-release fallback rows: the push
             push = 0j
             if M:
@@ -237,25 +231,25 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                 w = np.maximum(release_reach - qd, 0.0)
                 push = (w * release_directions_c(qz, obs_vz)).sum(axis=1)
             npush = np.abs(push)
-            vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * (dist > eps_g)
+            vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * outside
             v = np.where(is_rev, vr, v)
         u = v * conj_rot
         Uk[k] = u
-        # nominal execution (Eq. 1) and propagation over dt
-        vreal = v if ideal_xy else rot * (a_c * u + b_c * np.conj(u) + d_c)
+        # nominal execution (eq:execution) and propagation over dt
+        vreal = v if ideal_xy else kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
         Vk[k] = vreal
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
             vreal[gr] = w_gov
-        p = p + dt * vreal
+        p = kernels.euler_step(p, vreal, dt)
         if turning:
-            th = th + dt * (a20 * u.real + a21 * u.imag + dw)
+            th = kernels.euler_step(th, kernels.execution_yaw_rate_c(u, a20, a21, dw), dt)
             THk[k + 1] = th
             rot = np.exp(1j * th)
             conj_rot = np.conj(rot)
     Pk[N] = p
     Uk[N] = u = Uk[N - 1]
-    Vk[N] = rot * (a_c * u + b_c * np.conj(u) + d_c)       # u_{N-1} realized at the terminal yaw
+    Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)       # u_{N-1} realized at the terminal yaw
     return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov)
 
 
@@ -314,9 +308,8 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
     ahead = obstacles
     if len(obstacles):
         q = q_sigma_for(obstacles, params.uncertainty)
-        ahead = Obstacles(obstacles.p + tB * obstacles.v, obstacles.v,
-                          obstacles.cov + (tB * q)[:, None, None] * np.eye(2), obstacles.r, obstacles.static,
-                          obstacles.ids)
+        p_ahead, cov_ahead = kernels.advance_obstacles(obstacles.p, obstacles.v, obstacles.cov, q, tB)
+        ahead = Obstacles(p_ahead, obstacles.v, cov_ahead, obstacles.r, obstacles.static, obstacles.ids)
     nb = len(BEHAVIORS)
     p0 = np.repeat(rel.p[:, kB, 0] + 1j * rel.p[:, kB, 1], nb)
     th0 = np.repeat(rel.theta[:, kB], nb)
@@ -354,7 +347,6 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     A, unit_gradient = K.A, K.unit_gradient
     if M:
         Ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]               # (M,)
-        base = unc.r_robot_m + np.asarray(obstacles.r, float) + unc.d0_m   # r_R + r_i + d0  (M,)
     U = np.zeros((B, N, 3))
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
@@ -370,15 +362,13 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
         relv = Vc[:, :, None] - Ov                                     # R(A u + d) - v_i
         if shared:
             kap = kappa_img(obstacles, unc)
-            e_ex = ex.residual_horizon_s * np.interp(speed, ex.residual_speed_mps, ex.residual_bound_mps)
-            m = (unc.tau95_s * np.abs(relv) + (unc.beta * np.sqrt(lambda_max_2x2(cov)))[None]
-                 + (e_ex + unc.e_zoh_m)[:, :, None])                   # Eq. (15)
+            m = kernels.uncertainty_radius(np.abs(relv), kernels.prediction_term(cov, unc)[None],
+                                           kernels.e_exec_speed(speed, ex)[:, :, None], unc)   # eq:uncertainty_margin
             margin = kap * m
-            D = base + margin
         else:
             margin = np.full((B, N + 1, M), params.noshared_margin_m)
-            D = base + params.noshared_margin_m
-        h = q2 - D * D
+        D = kernels.inflated_radius(obstacles.r, margin, unc)          # eq:shared_barrier
+        h = kernels.barrier(q2, D)
         h_min = h.reshape(B, -1).min(axis=1)
         deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
         qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
@@ -396,7 +386,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     # ---- scores (Eq. 10)
     P_hist = np.stack([Pc.real, Pc.imag], -1)
     Pr = np.abs(pg - Pc[:, 0]) - np.abs(pg - Pc[:, N])
-    outside = np.abs(pg - Pc[:, :N]) > params.eps_g_m      # standing still inside the goal region is arrival
+    outside = kernels.outside_goal_region(np.abs(pg - Pc[:, :N]), params.eps_g_m)   # standing still there is arrival
     F = np.mean((speed[:, :N] < params.v_freeze_mps) & outside, axis=1)
     dU = np.diff(Uc[:, :N], axis=1)
     S = np.sum(dU.real ** 2 + dU.imag ** 2, axis=1) + speed[:, 0] ** 2   # u_w = 0 in every behavior
@@ -405,7 +395,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    stall = ((params.v_freeze_mps * N * params.dt_s, np.abs(pg - Pc[:, N]) <= params.eps_g_m)
+    stall = ((params.v_freeze_mps * N * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, N]), params.eps_g_m))
              if params.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
                        stall)

@@ -9,11 +9,11 @@ velocity (first-order, "velocity = force" form used for velocity-controlled mobi
 * Repulsion (:func:`repulsive_velocity`), Khatib's FIRAS form: U_rep,i = 1/2 k_rep (1/rho_i - 1/rho_0)^2 for
   rho_i <= rho_0, 0 beyond, with rho_i = ||q_i|| - D_i the distance between the robot's and the obstacle's
   surfaces, D_i = r_R + r_i (Khatib's rho is the shortest distance to the obstacle; the method's standoff comes
-  from its influence distance rho_0, no extra margin: ``margin_m`` 0; the shared uncertainty m_i of Eq. (15) is
-  BIG-CBF's, applied to every method by the common hard CBF downstream), so
+  from its influence distance rho_0, no extra margin: ``margin_m`` 0; the shared uncertainty m_i of
+  eq:uncertainty_margin is BIG-CBF's, applied to every method by the common hard CBF downstream), so
   -grad U_rep,i = k_rep (1/rho_i - 1/rho_0) / rho_i^2 q_i/||q_i||. rho_i is floored at ``rho_min_m`` (the
   field stays finite when the estimate is already inside D_i).
-* Obstacles are taken where the shared prediction (Eq. 2) puts them ``lookahead_s`` ahead (the current estimate
+* Obstacles are taken where the shared prediction (eq:obs_prop) puts them ``lookahead_s`` ahead (the current estimate
   for static ones); APF itself is reactive and has no horizon.
 * The sum is saturated at v_max (translational), wz = 0 (holonomic base, circular footprint), then clipped to the
   actuator box. Zero inside the goal region.

@@ -11,17 +11,17 @@ the backup input (the form whose optimal blend van Wijk, Das, Molnar, Ames and B
 control with bounded inputs: a closed-form solution for backup control barrier functions", derive in closed
 form), searched on a grid rather than in closed form. Here, at every control tick:
 
-* Nominal: the GOAL feedback law (Eq. 8 with b = GOAL), as for CBF-only.
+* Nominal: the GOAL feedback law (eq:behavior_feedback with b = GOAL), as for CBF-only.
 * Backup policy pi_b: braking to a stop (world velocity command 0) tracked with the deceleration limit
   ``a_brake_mps2`` (:mod:`.shield`); horizon N dt = 1.5 s; safety h_i^k = ||q_i^k||^2 - D_i^2 >= 0 against the
-  shared prediction (Eqs. 2-3) for every obstacle and step.
+  shared prediction (eq:obs_prop, eq:cov_prop) for every obstacle and step.
 * Geometry (the method's own, not BIG-CBF's shared uncertainty): D_i = r_R + r_i, the footprint against the
   obstacle with no extra margin (``margin_m`` 0). Backup CBFs certify the implicit safe set of a collision-free
   constraint set; the robustness they add comes from the backup horizon, not from an inflated radius, and Chen et
   al. state no margin. The common hard CBF downstream enforces r_R + r_i + d0 + kappa_exec m_i for every method.
 * Shield (interpolation): candidates u_lambda = (1 - lambda) u_nom + lambda u_b for
   lambda on the grid ``blends`` (0 = nominal, 1 = backup). For each, the state after one control step T_C
-  under u_lambda (Eq. 1, nominal) is computed and the backup rollout from there (initial velocity that of
+  under u_lambda (eq:execution, nominal) is computed and the backup rollout from there (initial velocity that of
   u_lambda, obstacles predicted from T_C on) is checked. The smallest certified lambda is executed; if none is
   certified the backup command itself is executed (the shield's last resort; the hard CBF downstream handles
   what braking cannot).
@@ -36,7 +36,7 @@ import numpy as np
 from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
-from ..uncertainty import nominal_velocity
+from ..kernels import execution_velocity
 from .common import Geometry, clip_command, predict
 from .shield import ShieldPlanner, one_step, rollout
 
@@ -73,7 +73,7 @@ class BackupCbfPlanner(ShieldPlanner):
         p = self.params
         lam = np.asarray(self.backup.blends, float)
         U = (1.0 - lam)[:, None] * u_nom[None, :]                  # u_b = 0
-        v0 = nominal_velocity(state.theta, U, p.uncertainty.execution)
+        v0 = execution_velocity(state.theta, U, p.uncertainty.execution)
         p1 = one_step(state.p[None], state.theta, U, p)
         pred = predict(obstacles, p, t0_s=p.T_C_s)
         ro = rollout(p1, v0, state.theta, brake_policy, pred, p, self.backup.a_brake_mps2,

@@ -1,12 +1,13 @@
-"""Helpers shared by the comparison methods: the shared prediction (Eqs. 2-3), rollouts under the nominal
-execution model (Eq. 1) and each method's own collision barrier h_i = ||q_i||^2 - D_i^2 along a horizon.
+"""Helpers shared by the comparison methods: the shared prediction (``eq:obs_prop``, ``eq:cov_prop``), rollouts
+under the nominal execution model (``eq:execution``) and each method's own collision barrier h_i = ||q_i||^2 - D_i^2
+along a horizon. The formulas are in :mod:`bigcbf.control.kernels`.
 
 Every baseline that looks ahead uses the same constant-velocity obstacle prediction with growing covariance as
 BIG-CBF (``predict_obstacles``; all methods receive identical observations). Their collision geometry is their
 own (:class:`Geometry`): D_i = scale (r_R + r_i) + margin_m, the robot's and the obstacle's radii and the method's
 own safety margin from its source (each module documents its choice). They do *not* plan with the shared
-uncertainty radius m_i of Eq. (15): in the paper, sharing that uncertainty with the planning layer is BIG-CBF's
-contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
+uncertainty radius m_i of ``eq:uncertainty_margin``: in the paper, sharing that uncertainty with the planning layer is
+BIG-CBF's contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
 """
 from __future__ import annotations
 
@@ -18,7 +19,9 @@ from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import clip_command  # noqa: F401  (re-exported for the baselines)
 from ..prediction import predict_obstacles, q_sigma_for
-from ..uncertainty import barrier, nominal_velocity, rotation
+from .. import kernels
+from ..kernels import body_from_world  # noqa: F401  (re-exported for the baselines)
+from ..uncertainty import barrier, rotation
 
 _TINY = 1e-12
 
@@ -42,7 +45,8 @@ class Geometry:
 
 @dataclass(frozen=True)
 class Prediction:
-    """O^k for k = 0..K (Eqs. 2-4): p (K+1, M, 2) [m], cov (K+1, M, 2, 2) [m^2], v (M, 2) [m/s], r (M,) [m]."""
+    """O^k for k = 0..K (eq:obs_prop, eq:cov_prop, eq:predicted_obstacles): p (K+1, M, 2) [m], cov (K+1, M, 2, 2)
+    [m^2], v (M, 2) [m/s], r (M,) [m]."""
 
     p: np.ndarray
     cov: np.ndarray
@@ -56,44 +60,27 @@ class Prediction:
 
 def predict(obstacles: Obstacles, params: StackParams, K: int | None = None, dt: float | None = None,
             t0_s: float = 0.0) -> Prediction:
-    """The shared prediction (Eqs. 2-3) over K steps of dt (default N and dt_s of StackParams), starting
-    ``t0_s`` seconds ahead of the estimates (positions advanced by t0 v_i and covariance grown by t0 q_Sigma)."""
+    """The shared prediction (``eq:obs_prop``, ``eq:cov_prop``) over K steps of dt (default N and dt_s of
+    StackParams), starting ``t0_s`` seconds ahead of the estimates (positions advanced by t0 v_i and covariance
+    grown by t0 q_Sigma: ``kernels.advance_obstacles``)."""
     K = params.N if K is None else K
     dt = params.dt_s if dt is None else dt
     q = q_sigma_for(obstacles, params.uncertainty)
     if t0_s > 0 and len(obstacles):
-        obstacles = Obstacles(obstacles.p + t0_s * obstacles.v, obstacles.v,
-                              obstacles.cov + (t0_s * q)[:, None, None] * np.eye(2), obstacles.r,
-                              obstacles.static, obstacles.ids)
+        p0, cov0 = kernels.advance_obstacles(obstacles.p, obstacles.v, obstacles.cov, q, t0_s)
+        obstacles = Obstacles(p0, obstacles.v, cov0, obstacles.r, obstacles.static, obstacles.ids)
     p, cov = predict_obstacles(obstacles, K, dt, q)
     return Prediction(p, cov, np.asarray(obstacles.v, float), np.asarray(obstacles.r, float))
 
 
 def integrate(state: RobotState, u: np.ndarray, dt: float, params: StackParams,
               p0: np.ndarray | None = None, theta0: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (1) without the residual, integrated with forward Euler: body twists u (B, K, 3) held for dt each.
-
-    Body-frame realized twist A u + d; yaw theta_{k+1} = theta_k + dt (A u + d)_wz; position
-    p_{k+1} = p_k + dt R(theta_k)(A u + d)_xy. Returns positions (B, K+1, 2) [m] and yaws (B, K+1) [rad].
-    """
-    u = np.asarray(u, float)
-    ex = params.uncertainty.execution
-    A, d = np.asarray(ex.A, float), np.asarray(ex.d, float)
+    """``eq:execution`` without the residual, integrated with forward Euler from the state (or p0, theta0): body
+    twists u (B, K, 3) held for dt each (``kernels.euler_paths``). Returns positions (B, K+1, 2) [m] and yaws
+    (B, K+1) [rad]."""
     p0 = state.p if p0 is None else np.asarray(p0, float)
     theta0 = state.theta if theta0 is None else float(theta0)
-    B, K = u.shape[:2]
-    wz = u @ A[2] + d[2]                                         # (B, K)
-    theta = np.concatenate([np.full((B, 1), theta0), theta0 + dt * np.cumsum(wz, axis=1)], axis=1)
-    v = nominal_velocity(theta[:, :-1], u, ex)                   # (B, K, 2)
-    p = np.concatenate([np.broadcast_to(p0, (B, 1, 2)), p0 + dt * np.cumsum(v, axis=1)], axis=1)
-    return p, theta
-
-
-def body_from_world(theta, v_world) -> np.ndarray:
-    """u = [R(theta)^T v, 0] (..., 3) for world-frame velocities v (..., 2) (yaw rate 0)."""
-    v = np.asarray(v_world, float)
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1], np.zeros(v.shape[:-1])], -1)
+    return kernels.euler_paths(p0, theta0, u, dt, params.uncertainty.execution)
 
 
 def world_velocity(state: RobotState) -> np.ndarray:
@@ -103,7 +90,8 @@ def world_velocity(state: RobotState) -> np.ndarray:
 
 def barrier_along(paths: np.ndarray, pred: Prediction, params: StackParams, geometry: Geometry) -> np.ndarray:
     """h_i^k = ||p_k - p_{i,k}||^2 - D_i^2 for every rollout b, state k = 0..K and obstacle i, shape (B, K+1, M)
-    [m^2], with the method's own D_i = ``geometry.radius(r_i)`` against the shared prediction p_{i,k} (Eq. 2)."""
+    [m^2], with the method's own D_i = ``geometry.radius(r_i)`` against the shared prediction p_{i,k}
+    (``eq:obs_prop``); the barrier of ``eq:shared_barrier`` with the method's D_i (``kernels.barrier``)."""
     B, K1 = paths.shape[:2]
     if pred.M == 0:
         return np.full((B, K1, 0), np.inf)
@@ -121,8 +109,8 @@ def surface_distance(paths: np.ndarray, pred: Prediction, params: StackParams, g
 
 
 def at_goal(state: RobotState, goal: np.ndarray, params: StackParams) -> bool:
-    """Inside the goal region ||p - p_g|| <= eps_g (Sec. II): every method commands zero there."""
-    return bool(np.hypot(*(state.p - goal)) <= params.eps_g_m)
+    """Inside the goal region ``eq:goal_region``, ||p - p_g|| <= eps_g: every method commands zero there."""
+    return bool(kernels.in_goal_region(kernels.goal_distance(state.p, goal), params.eps_g_m))
 
 
 def accel_limited(v0: np.ndarray, v_cmd: np.ndarray, a_max: float, dt: float) -> np.ndarray:

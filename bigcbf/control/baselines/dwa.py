@@ -9,15 +9,15 @@ G(v) = sigma(alpha heading + beta dist + gamma vel). Here, at every control tick
   ``n_wz`` samples (plus the exact stop command, so braking is always a candidate). ``window_s`` = 0.25 s, not
   one 50 ms tick: the odometry twist lags the command by the actuation delay, and a one-tick window would let
   the planner barely change its command.
-* Rollout: each sample held for the 1.5 s horizon (N = 15 steps of dt = 0.1 s) under Eq. (1) (arcs when
-  wz != 0), against the shared prediction (Eqs. 2-3) of every obstacle.
-* Admissibility: the rollout stays outside every collision radius D_i = r_R + r_i (the method's own geometry:
-  Fox et al. admit a velocity when the robot's footprint can stop before touching the obstacle; no margin,
-  ``margin_m`` 0; the shared uncertainty m_i of Eq. (15) is BIG-CBF's, applied to every method by the common hard
-  CBF downstream) at every step of the 1.5 s horizon. Fox's Va (the robot can stop before the first collision on its
-  trajectory, ||v|| <= sqrt(2 a dist)) is implied: an admissible trajectory has no collision within the horizon,
-  and the braking distance at v_max, 0.8^2 / (2 * 2.0) = 0.16 m, is far shorter than the horizon's path. If no
-  sample is admissible, the sample with the largest worst-case clearance wins.
+* Rollout: each sample held for the 1.5 s horizon (N = 15 steps of dt = 0.1 s) under eq:execution (arcs when
+  wz != 0), against the shared prediction (eq:obs_prop, eq:cov_prop) of every obstacle.
+* Admissibility: the rollout stays outside every collision radius D_i = r_R + r_i (the method's own geometry: Fox et al.
+  admit a velocity when the robot's footprint can stop before touching the obstacle; no margin, ``margin_m`` 0; the
+  shared uncertainty m_i of eq:uncertainty_margin is BIG-CBF's, applied to every method by the common hard CBF
+  downstream) at every step of the 1.5 s horizon. Fox's Va (the robot can stop before the first collision on its
+  trajectory, ||v|| <= sqrt(2 a dist)) is implied: an admissible trajectory has no collision within the horizon, and the
+  braking distance at v_max, 0.8^2 / (2 * 2.0) = 0.16 m, is far shorter than the horizon's path. If no sample is
+  admissible, the sample with the largest worst-case clearance wins.
 * Objective (holonomic "heading" = goal progress): progress = ||p_0 - p_g|| - ||p_K - p_g|| [m]; dist = the
   smallest clearance ||q_i|| - D_i over the rollout, capped at ``clearance_cap_m``; vel = ||v_xy||. As in Fox et
   al., each term is normalized over the window (divided by its largest value) before weighting; a small penalty

@@ -11,12 +11,12 @@ numba: the array version made (512, 15, 24) temporaries and took ~80 % of a cycl
 * Sampling (Williams et al., Alg. 2): V^s = V + eps^s, eps ~ N(0, sigma^2 I), each sample clipped to
   |v| <= v_max; sample 0 is the unperturbed mean, sample 1 the stop sequence. The RNG is
   np.random.default_rng(seed) created in ``reset(seed)``: an episode is deterministic per seed.
-* Rollout: Eq. (1) (nominal execution model) from the current state, obstacles by the shared prediction
-  (Eqs. 2-3); the method's own collision radius D_i = r_R + r_i + ``margin_m`` with margin_m = 0.10 m, the default
-  ``collision_margin_distance`` of Nav2's MPPI controller ("margin distance from collision to apply severe
-  penalty, similar to footprint inflation; between 0.05-0.2 is reasonable"; Williams et al. penalize track
-  boundaries and state no obstacle margin). The shared uncertainty m_i of Eq. (15) is BIG-CBF's; the common hard
-  CBF downstream applies it to every method.
+* Rollout: eq:execution (nominal execution model) from the current state, obstacles by the shared prediction
+  (eq:obs_prop, eq:cov_prop); the method's own collision radius D_i = r_R + r_i + ``margin_m`` with margin_m = 0.10 m,
+  the default ``collision_margin_distance`` of Nav2's MPPI controller ("margin distance from collision to apply severe
+  penalty, similar to footprint inflation; between 0.05-0.2 is reasonable"; Williams et al. penalize track boundaries
+  and state no obstacle margin). The shared uncertainty m_i of eq:uncertainty_margin is BIG-CBF's; the common hard CBF
+  downstream applies it to every method.
 * Cost S(V^s) = sum_k dt [w_goal ||p_k - p_g|| + w_coll 1(d_k < 0) + w_clear exp(-max(d_k, 0) / l_clear)]
   + w_term ||p_N - p_g|| + w_smooth sum_k ||V_k - V_{k-1}||^2 (V_{-1} = the measured velocity)
   + gamma sum_k V_k^T Sigma^{-1} eps_k (the control-cost term of the information-theoretic update, Williams'
@@ -118,12 +118,11 @@ def temperature(S: np.ndarray, ess_target: float, iterations: int = 40) -> float
 
 @kernel
 def _rollout_costs(Vs, eps, V, px, py, theta0, v0, goal, P, D, A, d, w):
-    """S(V^s) and the rollout positions of ``MppiPlanner.costs``, one sample at a time: the body command
-    u_k = [R(theta)^T V_k, 0] with the yaw at planning time; Eq. (1) nominal (eq:execution, no residual)
-    integrated with forward Euler as ``common.integrate`` (yaw first, then p_{k+1} = p_k + dt R(theta_k)(A u_k +
-    d)_xy); d_k = min_i ||q_i|| - D_i against the shared prediction P (N, M, 2) (eq:obs_prop), with the method's
-    own D_i (``Geometry``). A non-finite distance makes the cost non-finite, so ``optimize`` gives that sample no
-    weight."""
+    """S(V^s) and the rollout positions of ``MppiPlanner.costs``, one sample at a time: the body command u_k =
+    [R(theta)^T V_k, 0] with the yaw at planning time; eq:execution nominal (no residual) integrated with forward Euler
+    as ``kernels.euler_paths`` (``common.integrate``) (yaw first, then p_{k+1} = p_k + dt R(theta_k)(A u_k + d)_xy);
+    d_k = min_i ||q_i|| - D_i against the shared prediction P (N, M, 2) (eq:obs_prop), with the method's own D_i
+    (``Geometry``). A non-finite distance makes the cost non-finite, so ``optimize`` gives that sample no weight."""
     S, N = Vs.shape[0], Vs.shape[1]
     M = D.shape[0]
     dt, w_goal, w_term, w_coll, w_clear, l_clear, w_smooth, g_ctrl = w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]

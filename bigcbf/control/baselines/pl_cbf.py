@@ -14,8 +14,8 @@ own geometry below):
 * RELEASE: the reverse-release law of BIG-CBF's fallback (:func:`release_velocity`, closed loop: regenerated
   from the rollout's position and the predicted obstacles at every step).
 
-At every control tick: u_nom = the GOAL feedback law (Eq. 8). The library is rolled out from the state after
-one control step of u_nom (velocity that of u_nom, obstacles predicted from T_C). If at least one policy is
+At every control tick: u_nom = the GOAL feedback law (eq:behavior_feedback). The library is rolled out from the
+state after one control step of u_nom (velocity that of u_nom, obstacles predicted from T_C). If at least one policy is
 safe there (min h >= 0), u_nom is executed (mode NOMINAL). Otherwise the library is rolled out from the current
 state (current measured velocity) and the certified policy with the best value is executed (its first command;
 mode = its name). Value = goal progress of the rollout, ||p_0 - p_g|| - ||p_K - p_g|| [m], ties to the larger
@@ -38,7 +38,7 @@ from ...params.checks import check_ranges
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import goal_basis, release_velocity
-from ..uncertainty import nominal_velocity
+from ..kernels import execution_velocity
 from .common import Geometry, body_from_world, clip_command, predict, world_velocity
 from .shield import ShieldPlanner, one_step, rollout
 
@@ -105,7 +105,7 @@ class PlCbfPlanner(ShieldPlanner):
         L = len(lib)
         # 1) is the state after one step of the nominal certified by some library policy?
         p1 = one_step(state.p, state.theta, u_nom, p)
-        v1 = nominal_velocity(state.theta, u_nom, p.uncertainty.execution)
+        v1 = execution_velocity(state.theta, u_nom, p.uncertainty.execution)
         geo = Geometry(self.pl.margin_m, self.pl.radius_scale)
         ro = rollout(np.tile(p1, (L, 1)), np.tile(v1, (L, 1)), state.theta, lib.policy(p1),
                      predict(obstacles, p, t0_s=p.T_C_s), p, self.pl.a_max_mps2, geo)

@@ -2,7 +2,7 @@
 
 A fallback policy maps (step k, robot positions (B, 2), predicted obstacles O^k) to commanded world
 velocities (B, 2). The rollout's state is the robot's realized world velocity v (what odometry measures); a
-command asks, through the nominal execution model of Eq. (1) (A, d; the yaw is held, wz = 0), for the realized
+command asks, through the nominal execution model ``eq:execution`` (A, d; the yaw is held, wz = 0), for the realized
 velocity E(c) = R(theta)(A_xy R(theta)^T c + d_xy), which the robot reaches with an acceleration limit ``a_max``
 (it cannot stop instantly: :func:`~bigcbf.control.baselines.common.accel_limited`); semi-implicit Euler:
 
@@ -12,7 +12,7 @@ The initial v0 is a realized velocity too (measured, or E of the command about t
 
 Safety of a rollout is the method's own barrier h_i^k = ||q_i^k||^2 - D_i^2 >= 0 (D_i of the shield's
 :class:`~bigcbf.control.baselines.common.Geometry`: footprint, obstacle radius, the method's margin) for every
-obstacle i and every state k = 0..K against the shared prediction (Eqs. 2-3).
+obstacle i and every state k = 0..K against the shared prediction (``eq:obs_prop``, ``eq:cov_prop``).
 """
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import behavior_command
 from ..planner import PlanInfo, fail_safe
-from ..uncertainty import nominal_velocity
+from .. import kernels
+from ..kernels import execution_velocity
 from .common import Geometry, Prediction, accel_limited, at_goal, barrier_along, body_from_world
 
 Policy = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
@@ -52,15 +53,15 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
     P = np.empty((B, K + 1, 2))
     Vc = np.empty((B, K, 2))
     P[:, 0] = p
-    # the yaw is held, so Eq. (1) on a world command is affine: E(cmd) = R (A_xy R^T cmd + d_xy) = cmd M^T + c
-    c = nominal_velocity(theta, np.zeros(3), ex)
-    M = np.stack([nominal_velocity(theta, body_from_world(theta, e), ex) - c for e in np.eye(2)], -1)
+    # the yaw is held, so eq:execution on a world command is affine: E(cmd) = R (A_xy R^T cmd + d_xy) = cmd M^T + c
+    c = execution_velocity(theta, np.zeros(3), ex)
+    M = np.stack([execution_velocity(theta, body_from_world(theta, e), ex) - c for e in np.eye(2)], -1)
     ideal = bool(np.allclose(M, np.eye(2), rtol=0, atol=1e-15) and not c.any())
     for k in range(K):
         cmd = policy(k, p, pred.p[k])
         Vc[:, k] = cmd
         v = accel_limited(v, cmd if ideal else cmd @ M.T + c, a_max, dt)
-        p = p + dt * v
+        p = kernels.euler_step(p, v, dt)
         P[:, k + 1] = p
     U = body_from_world(theta, Vc)
     h = barrier_along(P, pred, params, geometry)
@@ -69,15 +70,16 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
 
 
 def one_step(p: np.ndarray, theta: float, u_body: np.ndarray, params: StackParams) -> np.ndarray:
-    """The position after one control period T_C under u (Eq. 1, nominal): p + T_C R(theta)(A u + d)."""
-    return np.asarray(p, float) + params.T_C_s * nominal_velocity(theta, np.asarray(u_body, float),
-                                                                  params.uncertainty.execution)
+    """The position after one control period T_C under u (``eq:execution``, nominal): p + T_C R(theta)(A u + d)."""
+    return kernels.euler_step(np.asarray(p, float), execution_velocity(theta, np.asarray(u_body, float),
+                                                                       params.uncertainty.execution), params.T_C_s)
 
 
 class ShieldPlanner:
-    """What the policy shields share: at every control tick the nominal input is the GOAL feedback law (Eq. 8
-    with b = GOAL, as for CBF-only) and ``shield`` decides what to send instead; zero inside the goal region.
-    Deterministic (``reset`` ignores the seed); ``last_h_min`` keeps the latest rollouts' worst barrier values."""
+    """What the policy shields share: at every control tick the nominal input is the GOAL feedback law
+    (eq:behavior_feedback with b = GOAL, as for CBF-only) and ``shield`` decides what to send instead; zero inside the
+    goal region. Deterministic (``reset`` ignores the seed); ``last_h_min`` keeps the latest rollouts' worst barrier
+    values."""
 
     name = ""
 
