@@ -59,6 +59,9 @@ class Imagination:
                                          # m_i (Eq. 14), or BIG-CBF-NoShared's fixed margin
     #: (v_freeze N dt [m], (B,) bool: the rollout ends in the goal region), for :attr:`viable`
     params_stall: tuple | None = None
+    #: (B,) progress along the maneuver [m]: sum_k dt e_k^T w_k, e_k the direction of the behavior's command (Eq. 8)
+    #: at step k, w_k the imagined velocity (the filter model's with the governor); None: use P only
+    along: np.ndarray | None = None
 
     def index(self, mode: str) -> int:
         return self.modes.index(mode)
@@ -72,7 +75,8 @@ class Imagination:
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
-        stalled = (np.asarray(self.P) < p_stall) & ~goal_reached & np.array([m != "YIELD" for m in self.modes])
+        prog = np.asarray(self.P) if self.along is None else np.maximum(self.P, self.along)
+        stalled = (prog < p_stall) & ~goal_reached & np.array([m != "YIELD" for m in self.modes])
         return np.asarray(self.accepted) & ~stalled
 
 
@@ -137,6 +141,7 @@ class _Rollout:
     TH: np.ndarray              # (B, N+1) yaw
     Oc: np.ndarray | None       # (N+1, M) complex predicted obstacle positions
     cov: np.ndarray | None      # (N+1, M, 2, 2) predicted covariances
+    along: np.ndarray | None = None   # (B,) progress along the maneuver [m] (:func:`maneuver_progress`)
 
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
@@ -197,6 +202,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
         pass_extra = rR + PASS_EXTRA_M
 
+    along = np.zeros(B)
     for k in range(N):
         Pk[k] = p
         # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
@@ -222,6 +228,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
         v = e * np.minimum(gain, vmax * (dist > eps_g) / np.maximum(np.abs(e), _TINY))
+        nv = np.abs(v)
+        vdir = np.where(nv > _TINY, v / np.maximum(nv, _TINY), 0j)       # the maneuver's direction at step k
         w_gov = None
         if M and govern:     # the governed speed and the filter model's velocity (governor.py)
             gr = gov_rows
@@ -247,6 +255,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
             vreal[gr] = w_gov
+        along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
         p = p + dt * vreal
         if turning:
             th = th + dt * (a20 * u.real + a21 * u.imag + dw)
@@ -256,7 +265,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Pk[N] = p
     Uk[N] = u = Uk[N - 1]
     Vk[N] = rot * (a_c * u + b_c * np.conj(u) + d_c)       # u_{N-1} realized at the terminal yaw
-    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov)
+    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
 
 
 def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
@@ -408,4 +417,4 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     stall = ((params.v_freeze_mps * N * params.dt_s, np.abs(pg - Pc[:, N]) <= params.eps_g_m)
              if params.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
-                       stall)
+                       stall, ro.along if params.speed_governor else None)
