@@ -69,9 +69,12 @@ class Imagination:
     @property
     def viable(self) -> np.ndarray:
         """(B,) bool: the candidates the selection may retain (:class:`bigcbf.control.selection.BehaviorSelector`):
-        accepted (Eq. 16) and, for a moving behavior, *making progress*: its imagined progress P_b (Eq. 10) is at least
-        what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. YIELD
-        stands still by design. Only with ``StackParams.speed_governor``; without it: accepted."""
+        accepted (Eq. 16) and, for a moving behavior, *making progress*: the larger of its imagined progress P_b
+        (Eq. 10, goal distance) and its progress along its own maneuver (:attr:`along`) is at least what the freeze
+        speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. Progress along the
+        maneuver keeps a sidestep in front of a wide obstacle viable: sliding along it barely shortens the goal
+        distance within the horizon (docs/fidelity.md, "Liveness"). YIELD stands still by design. Only with
+        ``StackParams.speed_governor``; without it: accepted."""
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
@@ -141,7 +144,7 @@ class _Rollout:
     TH: np.ndarray              # (B, N+1) yaw
     Oc: np.ndarray | None       # (N+1, M) complex predicted obstacle positions
     cov: np.ndarray | None      # (N+1, M, 2, 2) predicted covariances
-    along: np.ndarray | None = None   # (B,) progress along the maneuver [m] (:func:`maneuver_progress`)
+    along: np.ndarray | None = None   # (B,) progress along the maneuver [m] (Imagination.along)
 
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
