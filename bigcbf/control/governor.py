@@ -26,13 +26,19 @@ and the filter model (:func:`filter_model`) is the filter's QP in 2-D: the Eucli
 ``MODEL_ROWS`` most violated half-planes, within the speed disk v_max. Its output w*(s) is what the filter would let
 the robot do. The governed scale is
 
-    s* = argmax_s  [ e_b^T w*(s) - ||w*(s) - w(s)|| ]       (e_b = v_b / ||v_b||; near-ties to the smaller s),
+    s* = argmax_s  e_b^T w*(s)       (e_b = v_b / ||v_b||; near-ties to the smaller s),
 
-the progress along the behavior's direction after the filter, less the filter's correction: a command the filter
-only slows is worth its admissible part; one it bends sideways is worth the progress the sliding keeps, minus the
-bend. With one row dead ahead this is the largest admissible grid scale (the robot slows down before the obstacle
-instead of running into its inflated radius); with a row at an angle it can be full speed, sliding along the row
-(tests/control/test_control_governor.py works both out by hand). The governed command is s* u_b; in the rollout
+the progress along the behavior's direction after the filter: a command the filter only slows is worth its
+admissible part; one it bends sideways is worth the progress the sliding keeps. With one row dead ahead this is the
+smallest grid scale that reaches the admissible speed (the robot slows down before the obstacle instead of running
+into its inflated radius); with a row at an angle it can be full speed, sliding along the row
+(tests/control/test_control_governor.py works both out by hand).
+
+An earlier version subtracted the filter's correction ||w*(s) - w(s)|| from the progress. It slowed every
+maneuver whose direction has a component into an obstacle to a crawl: a PASS or SIDE in front of a wide obstacle
+(forward part blocked, lateral part free) scored its full-speed slide and a slow slide alike, so the near-tie rule
+took the slow one, and the sidestep the scene needs moved at ~0.1 m/s (required_sidestepping, seeds 0-2: 0/3 with
+the correction, 3/3 without it; docs/fidelity.md, "Liveness"). The governed command is s* u_b; in the rollout
 (Eq. 9) the robot moves with w*(s*), the filter model's velocity, while the scores (Eq. 10: W, F, S) and the
 acceptance (Eq. 16) use the governed command.
 
@@ -151,8 +157,7 @@ def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tu
     dirn = L / np.maximum(np.abs(L), _TINY)
     prog = dirn.real[:, None] * w.real + dirn.imag[:, None] * w.imag          # progress along the behavior (B, S)
     rows = np.arange(B)
-    corr = np.abs(w - W0)                                # the filter model's correction of each scale's command
-    best = np.argmax(prog - corr - 1e-9 * S[None, :], axis=1)   # net progress; near-ties to the smaller scale
+    best = np.argmax(prog - 1e-9 * S[None, :], axis=1)   # progress after the filter; near-ties to the smaller scale
     s = np.where(np.abs(u) > _TINY, S[best], 1.0)
     return s, np.where(np.abs(u) > _TINY, w[rows, best], Rd)
 

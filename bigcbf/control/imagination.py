@@ -60,6 +60,9 @@ class Imagination:
                                          # m_i (Eq. 14), or BIG-CBF-NoShared's fixed margin
     #: (v_freeze N dt [m], (B,) bool: the rollout ends in the goal region), for :attr:`viable`
     params_stall: tuple | None = None
+    #: (B,) progress along the maneuver [m]: sum_k dt e_k^T w_k, e_k the direction of the behavior's command (Eq. 8)
+    #: at step k, w_k the imagined velocity (the filter model's with the governor); None: use P only
+    along: np.ndarray | None = None
 
     def index(self, mode: str) -> int:
         return self.modes.index(mode)
@@ -67,13 +70,17 @@ class Imagination:
     @property
     def viable(self) -> np.ndarray:
         """(B,) bool: the candidates the selection may retain (:class:`bigcbf.control.selection.BehaviorSelector`):
-        accepted (Eq. 16) and, for a moving behavior, *making progress*: its imagined progress P_b (Eq. 10) is at least
-        what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. YIELD
-        stands still by design. Only with ``StackParams.speed_governor``; without it: accepted."""
+        accepted (Eq. 16) and, for a moving behavior, *making progress*: the larger of its imagined progress P_b
+        (Eq. 10, goal distance) and its progress along its own maneuver (:attr:`along`) is at least what the freeze
+        speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. Progress along the
+        maneuver keeps a sidestep in front of a wide obstacle viable: sliding along it barely shortens the goal
+        distance within the horizon (docs/fidelity.md, "Liveness"). YIELD stands still by design. Only with
+        ``StackParams.speed_governor``; without it: accepted."""
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
-        stalled = (np.asarray(self.P) < p_stall) & ~goal_reached & np.array([m != "YIELD" for m in self.modes])
+        prog = np.asarray(self.P) if self.along is None else np.maximum(self.P, self.along)
+        stalled = (prog < p_stall) & ~goal_reached & np.array([m != "YIELD" for m in self.modes])
         return np.asarray(self.accepted) & ~stalled
 
 
@@ -130,6 +137,7 @@ class _Rollout:
     TH: np.ndarray              # (B, N+1) yaw
     Oc: np.ndarray | None       # (N+1, M) complex predicted obstacle positions
     cov: np.ndarray | None      # (N+1, M, 2, 2) predicted covariances
+    along: np.ndarray | None = None   # (B,) progress along the maneuver [m] (Imagination.along)
 
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
@@ -190,6 +198,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
         pass_extra = rR + PASS_EXTRA_M
 
+    along = np.zeros(B)
     for k in range(N):
         Pk[k] = p
         # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
@@ -216,6 +225,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
         v = e * np.minimum(gain, vmax * outside / np.maximum(np.abs(e), _TINY))
+        nv = np.abs(v)
+        vdir = np.where(nv > _TINY, v / np.maximum(nv, _TINY), 0j)       # the maneuver's direction at step k
         w_gov = None
         if M and govern:     # the governed speed and the filter model's velocity (governor.py)
             gr = gov_rows
@@ -241,6 +252,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
             vreal[gr] = w_gov
+        along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
         p = kernels.euler_step(p, vreal, dt)
         if turning:
             th = kernels.euler_step(th, kernels.execution_yaw_rate_c(u, a20, a21, dw), dt)
@@ -250,7 +262,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Pk[N] = p
     Uk[N] = u = Uk[N - 1]
     Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)       # u_{N-1} realized at the terminal yaw
-    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov)
+    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
 
 
 def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
@@ -398,4 +410,4 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     stall = ((params.v_freeze_mps * N * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, N]), params.eps_g_m))
              if params.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
-                       stall)
+                       stall, ro.along if params.speed_governor else None)

@@ -40,11 +40,11 @@ class BehaviorSelector:
     Frozen candidates (our choice; the paper invokes the fallback "if all regular behaviors fail the acceptance
     test"): with the speed governor (``bigcbf.control.governor``) a behavior whose direction is blocked does not
     run into the inflated radius, where Eq. (16) would reject it; it slows down to a stop in front of it. A moving
-    behavior (GOAL, PASS, SIDE) whose governed rollout gains less progress P_b (Eq. 10) than the freeze speed
-    would over the horizon, v_freeze N dt, and does not end in the goal region, can no more proceed than a rejected
-    one, so it is treated as one (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and
-    when no candidate is left the reverse-release fallback is invoked, as when all are rejected. YIELD is exempt
-    (standing still is what it does). Rules 1-4 read "viable" for "accepted".
+    behavior (GOAL, PASS, SIDE) whose governed rollout gains less progress than the freeze speed would over the
+    horizon, v_freeze N dt, both in goal distance (P_b of Eq. 10) and along its own maneuver, and does not end in the
+    goal region, can no more proceed than a rejected one, so it is treated as one
+    (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and when no candidate is left the
+    reverse-release fallback is invoked, as when all are rejected. YIELD is exempt (standing still is what it does). Rules 1-4 read "viable" for "accepted".
     """
 
     def __init__(self, params: StackParams):

@@ -33,14 +33,15 @@ def test_filter_model_projects_onto_one_row_or_the_corner_of_two():
 def test_obstacle_dead_ahead_slows_to_the_largest_admissible_scale():
     """Robot (0,0), u = (0.8, 0), static obstacle (0.7, 0), r = 0.25: q = (-0.7, 0), h = 0.49 - 0.25 = 0.24;
     Eq. (18): -2 * 0.7 w_x + 1.5 * 0.24 >= 0  <=>  w_x <= 0.257143. Scale s gives w_x = 0.8 s: admissible up to
-    s = 0.3214; s = 0.3 (w = 0.24, no correction, net 0.24) beats s = 0.4 (w projected to 0.257, correction 0.063,
-    net 0.194) and every larger s (net 0.514 - 0.8 s). s* = 0.3, the governed command (0.24, 0)."""
+    s = 0.3214; the progress after the filter is min(0.8 s, 0.257143): 0.24 at s = 0.3, 0.257143 at s = 0.4 and at
+    every larger s (projected onto the row). The smallest scale reaching the maximum: s* = 0.4, the governed command
+    (0.32, 0), the model's velocity (0.257143, 0)."""
     s, w = govern_c(np.array([0j]), np.array([1 + 0j]), np.array([0.8 + 0j]), np.array([0.7 + 0j]),
                     np.array([0j]), np.array([0.0]), np.array([0.25]), BARE)
-    assert s[0] == pytest.approx(0.3) and w[0] == pytest.approx(0.24 + 0j)
+    assert s[0] == pytest.approx(0.4) and w[0] == pytest.approx(0.36 / 1.4 + 0j)
     obs = Obstacles.from_lists([[0.7, 0.0]], r=0.25)
     u, s1 = govern_command(RobotState(0, 0, 0), obs, np.array([0.8, 0.0, 0.0]), BARE)
-    assert s1 == pytest.approx(0.3) and u == pytest.approx([0.24, 0.0, 0.0])
+    assert s1 == pytest.approx(0.4) and u == pytest.approx([0.32, 0.0, 0.0])
     # off: the nominal command
     off = dataclasses.replace(BARE, speed_governor=False)
     u, s1 = govern_command(RobotState(0, 0, 0), obs, np.array([0.8, 0.0, 0.0]), off)
@@ -49,10 +50,10 @@ def test_obstacle_dead_ahead_slows_to_the_largest_admissible_scale():
 
 def test_obstacle_ahead_right_keeps_full_speed_and_slides_along_the_row():
     """Obstacle at distance 0.7 along -(-0.6, 0.8): o = (0.42, -0.56), n = q/|q| = (-0.6, 0.8), h = 0.24, the row
-    -0.6 w_x + 0.8 w_y >= -0.257143. w0 = (0.8 s, 0) is admissible up to s = 0.5357 (s = 0.5: net progress 0.4).
-    Above, the projection w = w0 + (0.48 s - 0.257143)(-0.6, 0.8) gains 0.512 s + 0.154286 along x for a correction
-    0.48 s - 0.257143: net 0.032 s + 0.411429, largest at s = 1 (0.443429 > 0.4). s* = 1 and the model's velocity
-    (0.8 - 0.6 * 0.222857, 0.8 * 0.222857) = (0.666286, 0.178286)."""
+    -0.6 w_x + 0.8 w_y >= -0.257143. w0 = (0.8 s, 0) is admissible up to s = 0.5357 (s = 0.5: progress 0.4).
+    Above, the projection w = w0 + (0.48 s - 0.257143)(-0.6, 0.8) gains 0.512 s + 0.154286 along x, largest at
+    s = 1 (0.666286 > 0.4). s* = 1 and the model's velocity (0.8 - 0.6 * 0.222857, 0.8 * 0.222857) =
+    (0.666286, 0.178286)."""
     o = 0.7 * (0.6 - 0.8j)
     s, w = govern_c(np.array([0j]), np.array([1 + 0j]), np.array([0.8 + 0j]), np.array([o]),
                     np.array([0j]), np.array([0.0]), np.array([0.25]), BARE)
@@ -64,9 +65,9 @@ def test_obstacle_ahead_right_keeps_full_speed_and_slides_along_the_row():
 def test_uncertainty_radius_grows_with_the_scale_eq_15():
     """With tau95 = 0.2 s (kappa_exec = 1) the radius depends on the scale: D(s) = 0.5 + 0.2 * 0.8 s (Eq. 15, static
     obstacle). Obstacle dead ahead at 0.9: h(s) = 0.81 - D(s)^2, and Eq. (18) bounds w_x <= 1.5 h(s) / 1.8.
-    s = 0.4: D = 0.564, h = 0.491904, bound 0.40992 >= 0.32: admissible, net 0.32.
-    s = 0.5: D = 0.58, h = 0.4736, bound 0.394667 < 0.4: w = 0.394667, correction 0.005333, net 0.389333.
-    s = 0.6: D = 0.596, h = 0.454784, bound 0.378987: net 2 * 0.378987 - 0.48 = 0.277973 (and less above).
+    s = 0.4: D = 0.564, h = 0.491904, bound 0.40992 >= 0.32: admissible, progress 0.32.
+    s = 0.5: D = 0.58, h = 0.4736, bound 0.394667 < 0.4: w = 0.394667, progress 0.394667.
+    s = 0.6: D = 0.596, h = 0.454784, bound 0.378987: progress 0.378987 (the bound shrinks further above).
     s* = 0.5, w = 0.394667."""
     unc = dataclasses.replace(BARE.uncertainty, tau95_s=0.2)
     params = dataclasses.replace(BARE, uncertainty=unc)
