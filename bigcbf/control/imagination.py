@@ -198,7 +198,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
         pass_extra = rR + PASS_EXTRA_M
 
-    along = np.zeros(B)
+    # progress along the maneuver: only the liveness option's viability test reads it (Imagination.along)
+    along = np.zeros(B) if params.speed_governor else None
     for k in range(N):
         Pk[k] = p
         # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
@@ -225,8 +226,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             e[gr] = g[gr]
         # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
         v = e * np.minimum(gain, vmax * outside / np.maximum(np.abs(e), _TINY))
-        nv = np.abs(v)
-        vdir = np.where(nv > _TINY, v / np.maximum(nv, _TINY), 0j)       # the maneuver's direction at step k
+        if along is not None:
+            nv = np.abs(v)
+            vdir = np.where(nv > _TINY, v / np.maximum(nv, _TINY), 0j)   # the maneuver's direction at step k
         w_gov = None
         if M and govern:     # the governed speed and the filter model's velocity (governor.py)
             gr = gov_rows
@@ -252,7 +254,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
             vreal[gr] = w_gov
-        along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
+        if along is not None:
+            along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
         p = kernels.euler_step(p, vreal, dt)
         if turning:
             th = kernels.euler_step(th, kernels.execution_yaw_rate_c(u, a20, a21, dw), dt)
@@ -410,4 +413,4 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     stall = ((params.v_freeze_mps * N * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, N]), params.eps_g_m))
              if params.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
-                       stall, ro.along if params.speed_governor else None)
+                       stall, ro.along)
