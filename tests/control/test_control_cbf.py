@@ -41,7 +41,9 @@ def brute_force_qp(C, l, u_in, Hd, lo, hi):
             if k:
                 GS = G[S]
                 K = (GS * Hinv) @ GS.T
-                if abs(np.linalg.det(K)) < 1e-12:
+                with np.errstate(divide="ignore", invalid="ignore"):   # a singular K is skipped, not warned of
+                    singular = not abs(np.linalg.det(K)) >= 1e-12
+                if singular:
                     continue
                 lam = np.linalg.solve(K, g[S] - GS @ u_in)
                 u = u_in + Hinv * (GS.T @ lam)
