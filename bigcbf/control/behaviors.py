@@ -11,8 +11,16 @@ Choices the paper leaves open (documented here, parameters in StackParams):
 * Locally relevant obstacle i of eq:behavior_subgoals: seen from the robot along the goal direction d_g, with
   along-track distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest s_i)
   obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead (s_i - r_i <
-  ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + d_pass_min, i.e. driving straight to the goal would
-  bring the footprint closer than d0 + d_pass_min to it. Wall points (radius 0) take part like any obstacle.
+  ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + ``in_way_margin_m``, i.e. driving straight to the
+  goal would bring the footprint closer than d0 + 0.15 m to it, about the imagination's own margin for a static
+  obstacle (the barrier test of Eq. (16)). Wall points (radius 0) take part like any obstacle. (With d_pass_min,
+  0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS steered
+  around the outside of one of them, into it: docs/fidelity.md, "Liveness".)
+* The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or the relevant obstacle's
+  along-track distance s_i when it is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass
+  aims at the point beside the obstacle. With 0.85 m the pass dives at 45 degrees or more whatever the distance,
+  which clips whatever stands between the robot and a farther obstacle (the posts of the row it is passing
+  through, a door's jamb).
 * d_pass of eq:behavior_subgoals, per side sigma: the lateral shift that puts the robot's footprint, with
   eq:behavior_subgoals's 0.35 m clearance, beside the relevant obstacle's *group* on side sigma, d_pass =
   max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of obstacles connected to i
@@ -117,7 +125,8 @@ def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_of
     """The locally relevant obstacle of eq:behavior_subgoals for each row (see the module docstring).
 
     p, d_g, n_g (B, 2); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none, c_i (B,), r_i (B,)),
-    c_i and r_i being 0 where there is none; with ``with_offsets`` also the cross-track offsets c (B, M).
+    c_i and r_i being 0 where there is none; with ``with_offsets`` also the cross-track offsets c (B, M) and the
+    relevant obstacle's along-track distance s_i (B,) (0 where there is none).
     """
     p = np.atleast_2d(np.asarray(p, float))
     B, M = len(p), len(obs_r)
@@ -130,13 +139,13 @@ def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_of
     c = rel[..., 0] * n_g[:, None, 0] + rel[..., 1] * n_g[:, None, 1]
     r = np.asarray(obs_r, float)[None, :]
     relevant = ((s > -(unc.r_robot_m + r)) & (s - r < params.relevant_range_m)
-                & (np.abs(c) < unc.r_robot_m + r + unc.d0_m + params.d_pass_min_m))
+                & (np.abs(c) < unc.r_robot_m + r + unc.d0_m + params.in_way_margin_m))
     key = np.where(relevant, s, np.inf)
     j = np.argmin(key, axis=1)
     rows = np.arange(B)
     has = np.isfinite(key[rows, j])
     out = np.where(has, j, -1), np.where(has, c[rows, j], 0.0), np.where(has, r[0, j], 0.0)
-    return out + (c,) if with_offsets else out
+    return out + (c, np.where(has, s[rows, j], 0.0)) if with_offsets else out
 
 
 def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
@@ -150,8 +159,8 @@ def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
 
 def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
     """eq:behavior_subgoals: e_b = g_b - p (B, 2) for each row's mode:
-    GOAL p_g - p; PASS-sigma 0.85 d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a relevant
-    obstacle); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
+    GOAL p_g - p; PASS-sigma max(0.85, s_i) d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a
+    relevant obstacle; s_i its along-track distance, see the module docstring); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
     YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
     ``groups``: labels from :func:`obstacle_groups` (computed here when not given)."""
     mode_idx = np.asarray(mode_idx, int)
@@ -159,13 +168,15 @@ def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=N
     d_g, n_g, _ = goal_basis(p, goal)
     sigma = SIGMA[mode_idx]
     lateral = np.where(IS_SIDE[mode_idx], SIDE_LATERAL_M * sigma, 0.0)
+    forward = FORWARD_M[mode_idx]
     if np.any(IS_PASS[mode_idx]):
-        j, c_rel, r_rel, c = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params, with_offsets=True)
+        j, c_rel, r_rel, c, s_rel = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params, with_offsets=True)
         if groups is None:
             groups = obstacle_groups(obs_p, obs_r, params)
         ext = group_extent(sigma, j, c, obs_r, groups)
         lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(ext, r_rel, j >= 0, params), lateral)
-    e = FORWARD_M[mode_idx, None] * d_g + lateral[:, None] * n_g
+        forward = np.where(IS_PASS[mode_idx] & (j >= 0), np.maximum(forward, s_rel), forward)
+    e = forward[:, None] * d_g + lateral[:, None] * n_g
     return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
 
 

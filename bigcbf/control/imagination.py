@@ -164,7 +164,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         r = np.asarray(obstacles.r, float)
         base = rR + r + d0                                            # r_R + r_i + d0  (M,)
         cand_lo, cand_hi = -(rR + r), params.relevant_range_m + r
-        corridor = base + params.d_pass_min_m
+        corridor = base + params.in_way_margin_m                     # |c_i| below this: in the way
         release_reach = base + params.release_range_m
         obs_vz = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
         flat_rows = np.arange(B) * M
@@ -192,7 +192,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     THk = np.empty((N + 1, B))
     THk[:] = th
     d_min, v_rel, eps_g = params.d_pass_min_m, params.v_release_mps, params.eps_g_m
-    coef0, pass_sig_j, goal_rows = K.coef0, K.pass_sig_j, K.goal_rows
+    coef0, pass_sig_j, goal_rows, pass_fwd = K.coef0, K.pass_sig_j, K.goal_rows, K.pass_f
     gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
     if M:
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
@@ -220,7 +220,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             else:
                 ext = np.max(np.where(same_group[j], sigma[:, None] * z.imag + r[None, :], -np.inf), axis=1)
             off = has * np.maximum(np.maximum(d_min, ext + pass_extra), pass_floor[j])
-            coef = coef0 + pass_sig_j * off
+            # PASS aims beside the relevant obstacle: forward max(0.85, s_i) (behaviors.subgoal_error)
+            ahead = np.maximum(np.where(has, key.ravel()[flat], 0.0) - FORWARD_M[MODE_INDEX["PASS-L"]], 0.0)
+            coef = coef0 + pass_sig_j * off + pass_fwd * ahead
         e = dg * coef
         for gr in goal_rows:
             e[gr] = g[gr]

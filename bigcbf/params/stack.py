@@ -163,8 +163,12 @@ class StackParams:
       of alpha (|q|^2 - D^2) / (2 |q|); 1.5 1/s lets the robot close in at ~0.4 m/s when 0.3 m outside a 0.5 m
       inflated radius and brakes smoothly to zero at the boundary; alpha * T_C = 0.075 << 1 keeps the sampled
       filter close to its continuous-time design.
-    - ``d_pass_min_m`` and ``relevant_range_m``: the locally relevant obstacle and d_pass of Eq. (7), see
-      ``bigcbf.control.behaviors``.
+    - ``d_pass_min_m``, ``in_way_margin_m`` and ``relevant_range_m``: the locally relevant obstacle and d_pass of
+      Eq. (7), see ``bigcbf.control.behaviors``. ``in_way_margin_m`` (0.15 m, about the imagination's margin
+      kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way" when
+      the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
+      barrier test of Eq. (16); it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
+      way" of a robot centred in it (docs/fidelity.md, "Liveness").
     - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
       (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
     - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior viable):
@@ -203,6 +207,7 @@ class StackParams:
     v_release_mps: float = 0.3          # reverse-release fallback speed [m/s]
     release_range_m: float = 0.5        # obstacles within D0_i + this push the fallback [m]
     d_pass_min_m: float = 0.30          # minimum lateral passing offset [m]
+    in_way_margin_m: float = 0.15       # an obstacle is in the way within r_R + r_i + d0 + this of the goal line [m]
     relevant_range_m: float = 3.0       # look-ahead for the locally relevant obstacle [m]
     u_min: Vec3 = (-0.8, -0.8, -1.0)    # actuator box, lower (m/s, m/s, rad/s)
     u_max: Vec3 = (0.8, 0.8, 1.0)       # actuator box, upper (m/s, m/s, rad/s)
@@ -226,9 +231,9 @@ class StackParams:
                 raise FieldError(k, f"must be a finite number > 0, got {v}")
         nonneg = dict(v_freeze_mps=self.v_freeze_mps, eps_h_m2=self.eps_h_m2, w_W=self.w_W, w_P=self.w_P,
                       w_F=self.w_F, w_sw=self.w_sw, w_S=self.w_S, release_range_m=self.release_range_m,
-                      d_pass_min_m=self.d_pass_min_m, relevant_range_m=self.relevant_range_m,
-                      dwell_s=self.dwell_s, switch_rel=self.switch_rel, switch_abs=self.switch_abs,
-                      noshared_margin_m=self.noshared_margin_m)
+                      d_pass_min_m=self.d_pass_min_m, in_way_margin_m=self.in_way_margin_m,
+                      relevant_range_m=self.relevant_range_m, dwell_s=self.dwell_s, switch_rel=self.switch_rel,
+                      switch_abs=self.switch_abs, noshared_margin_m=self.noshared_margin_m)
         for k, v in nonneg.items():
             if not (math.isfinite(v) and v >= 0):
                 raise FieldError(k, f"must be a finite number >= 0, got {v}")

@@ -44,22 +44,47 @@ def test_feedback_eq_8_by_hand():
 
 
 def test_subgoals_eq_7_obstacle_dead_ahead():
-    """Robot (0,0), goal (5,0): d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 < 0.85).
+    """Robot (0,0), goal (5,0): d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 <
+    0.15 + 0.3 + 0.1 + 0.15 = 0.7). PASS forward: max(0.85, s_i = 2) = 2 (beside the obstacle).
     PASS-L: d_pass = max(0.3, 0.1 + 0.3 + 0.15 + 0.35) = 0.9, floor 0.15 + 0.3 + 0.35 = 0.8 -> offset 0.9.
     PASS-R: d_pass = max(0.3, -0.1 + 0.3 + 0.5) = 0.7 -> offset 0.8 (the floor)."""
     obs = Obstacles.from_lists([[2.0, 0.1]], r=0.3)
     p = np.zeros((7, 2))
     e = subgoal_error(mode_indices(MODES7), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
-    np.testing.assert_allclose(e, [[5, 0], [0.85, 0.9], [0.85, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
+    np.testing.assert_allclose(e, [[5, 0], [2.0, 0.9], [2.0, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
+    # an obstacle nearer than 0.85 m ahead: the paper's 0.85 m
+    near = Obstacles.from_lists([[0.5, 0.1]], r=0.3)
+    e = subgoal_error(mode_indices(("PASS-L",)), p[:1], np.array([5.0, 0.0]), near.p, near.r, P)
+    np.testing.assert_allclose(e, [[0.85, 0.9]])
 
 
 def test_subgoals_eq_7_obstacle_offset_to_one_side():
-    """Obstacle (1.5, 0.6), r 0.1: corridor 0.15 + 0.1 + 0.1 + 0.3 = 0.65 > 0.6 -> relevant.
-    PASS-L: d_pass = max(0.3, 0.6 + 0.1 + 0.15 + 0.35) = 1.2, floor 0.6 -> 1.2.
-    PASS-R: max(0.3, -0.6 + 0.1 + 0.5) = 0.3, floor 0.6 -> 0.6."""
-    obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
+    """Obstacle (1.5, 0.45), r 0.1: in the way, 0.45 < 0.15 + 0.1 + 0.1 + 0.15 = 0.5 -> relevant; forward 1.5.
+    PASS-L: d_pass = max(0.3, 0.45 + 0.1 + 0.15 + 0.35) = 1.05, floor 0.6 -> 1.05.
+    PASS-R: max(0.3, -0.45 + 0.1 + 0.5) = 0.3, floor 0.6 -> 0.6.
+    At (1.5, 0.6) it is not in the way (driving straight keeps the footprint 0.35 m > d0 + 0.15 m from it):
+    PASS keeps its goal-directed 0.85 m."""
+    obs = Obstacles.from_lists([[1.5, 0.45]], r=0.1)
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P)
-    np.testing.assert_allclose(e, [[0.85, 1.2], [0.85, -0.6]])
+    np.testing.assert_allclose(e, [[1.5, 1.05], [1.5, -0.6]])
+    beside = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), beside.p,
+                      beside.r, P)
+    np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
+
+
+def test_in_a_gap_the_relevant_obstacle_is_the_one_behind_it():
+    """Staggered posts (r 0.2): a robot centred in a 0.98 m gap between (0.1, +-0.69) sees the next row's post at
+    (1.5, 0.09) as the relevant one: the gap's posts are 0.69 > 0.15 + 0.2 + 0.1 + 0.15 = 0.6 off the goal line
+    (with the former band d_pass_min = 0.3, 0.69 < 0.75 made a gap post relevant and PASS steered around its outside).
+    PASS-R aims beside the next post: forward 1.5, offset max(0.3, -0.09 + 0.2 + 0.5) = 0.61, floor 0.7 -> 0.7."""
+    obs = Obstacles.from_lists([[0.1, 0.69], [0.1, -0.69], [1.5, 0.09]], r=0.2)
+    p = np.zeros((1, 2))
+    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
+    j, c, r = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    assert j.tolist() == [2] and c[0] == pytest.approx(0.09)
+    e = subgoal_error(mode_indices(("PASS-R",)), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
+    np.testing.assert_allclose(e, [[1.5, -0.7]])
 
 
 def test_no_relevant_obstacle_pass_goes_for_the_goal():
@@ -120,10 +145,10 @@ def test_pass_clears_the_whole_group_of_a_wide_obstacle():
     ys = np.linspace(-1.0, 1.0, 11)
     wall = Obstacles.from_lists(np.stack([np.full(11, 2.0), ys], 1), r=0.0, ids=-np.ones(11, int))
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), wall.p, wall.r, P)
-    np.testing.assert_allclose(e, [[0.85, 1.5], [0.85, -1.5]])
+    np.testing.assert_allclose(e, [[2.0, 1.5], [2.0, -1.5]])     # forward: beside the wall, 2 m ahead
     lone = wall.subset([5])
     e1 = subgoal_error(mode_indices(("PASS-L",)), np.zeros((1, 2)), np.array([5.0, 0.0]), lone.p, lone.r, P)
-    np.testing.assert_allclose(e1, [[0.85, 0.5]])
+    np.testing.assert_allclose(e1, [[2.0, 0.5]])
 
 
 def test_obstacle_groups_split_at_passable_gaps():
