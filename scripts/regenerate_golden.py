@@ -61,6 +61,12 @@ machine: the perturbed runs stand in for it.
   qp_infeasible_ratio 0.0234, e_cbf 0.048 absolute, the trace 1.3e-5, 0.027 and 0.06 in seconds 2-4). Over
   all 12 episodes the spread is wider (blind_corner/apf/1: time 2.85 s, e_cbf 16.8 of 28): an episode's
   spread depends on how close its own decisions are, so the tolerances follow the episodes the test runs.
+- After the behaviors' change of the relevant obstacle and PASS's forward distance (2026-11-24, later), the BIG-CBF
+  golden episode required_sidestepping/big-cbf/3 stopped being robust: after SIDE-L, GOAL and PASS-L (which
+  without a relevant obstacle also heads for the goal) are a near-tie, and y + 1e-12 picked the other one (so did
+  seeds 0, 1, 2, 4 and 5 of that scene). single_person_crossing/big-cbf/1 (GOAL, SIDE-L, YIELD, PASS-R, with a
+  walker) replaced it: its outcome, modes, trace and metrics stayed within every tolerance above under x, y and
+  yaw +-1e-12 and +-1e-9 (12 runs, compared with ``differences`` below).
 - The one-thread process gave bit-identical runs for 17 of 18 episodes; blind_corner/apf/0 differed, which is the
   process effect above (it differs as much with an unrelated environment variable), not the thread count.
 """
@@ -79,7 +85,7 @@ from bigcbf.scenario import load_scenario  # noqa: E402
 
 #: (scenario, method, seed): short episodes that exercise perception, planning (BIG-CBF's mode switching, a
 #: baseline), the CBF, walls and pedestrians, and whose outcome and mode sequence the measurement found robust
-GOLDEN_EPISODES = [("required_sidestepping", "big-cbf", 3), ("single_person_crossing", "cbf-only", 1),
+GOLDEN_EPISODES = [("single_person_crossing", "big-cbf", 1), ("single_person_crossing", "cbf-only", 1),
                    ("blind_corner", "apf", 3)]
 GOLDEN_FILE = ROOT / "tests" / "golden" / "episodes.json"
 TRACE_S = 4.0

@@ -132,7 +132,7 @@ def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_of
     B, M = len(p), len(obs_r)
     if M == 0:
         out = (np.full(B, -1), np.zeros(B), np.zeros(B))
-        return out + (np.zeros((B, 0)),) if with_offsets else out
+        return out + (np.zeros((B, 0)), np.zeros(B)) if with_offsets else out
     unc = params.uncertainty
     rel = np.asarray(obs_p, float)[None, :, :] - p[:, None, :]
     s = rel[..., 0] * d_g[:, None, 0] + rel[..., 1] * d_g[:, None, 1]

@@ -96,6 +96,12 @@ def test_no_relevant_obstacle_pass_goes_for_the_goal():
     assert j.tolist() == [-1, -1]
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
     np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
+    # no obstacle at all (an empty scan): the same
+    none = Obstacles.empty()
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), p, np.array([5.0, 0.0]), none.p, none.r, P)
+    np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
+    v = behavior_command("PASS-L", RobotState(0, 0, 0), none, np.array([5.0, 0.0]), P)
+    np.testing.assert_allclose(v, [0.8, 0.0, 0.0], atol=1e-12)
 
 
 def test_relevant_obstacle_is_the_nearest_in_the_way():
