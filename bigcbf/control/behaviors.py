@@ -16,11 +16,14 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   obstacle (the barrier test of Eq. (16)). Wall points (radius 0) take part like any obstacle. (With d_pass_min,
   0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS steered
   around the outside of one of them, into it: docs/fidelity.md, "Liveness".)
-* The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or the relevant obstacle's
-  along-track distance s_i when it is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass
-  aims at the point beside the obstacle. With 0.85 m the pass dives at 45 degrees or more whatever the distance,
-  which clips whatever stands between the robot and a farther obstacle (the posts of the row it is passing
-  through, a door's jamb).
+* The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or, for a relevant obstacle alone in
+  its group (one the footprint can pass on either side: a post, a person), its along-track distance s_i when that
+  is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass aims at the point beside the
+  obstacle. With 0.85 m the pass dives at 45 degrees or more whatever the distance, which clips whatever stands
+  between the robot and a farther post (the posts of the row it is passing through). A group (a wall, a wide body
+  seen as LiDAR points) keeps the paper's 0.85 m: the pass around a group's end must turn early, and aiming beside
+  a 2.7 m wide obstacle's face 3 m ahead made the pass too shallow to clear its end (required_sidestepping: 5 of
+  50 seeds timed out where 1 had).
 * d_pass of eq:behavior_subgoals, per side sigma: the lateral shift that puts the robot's footprint, with
   eq:behavior_subgoals's 0.35 m clearance, beside the relevant obstacle's *group* on side sigma, d_pass =
   max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of obstacles connected to i
@@ -160,7 +163,8 @@ def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
 def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
     """eq:behavior_subgoals: e_b = g_b - p (B, 2) for each row's mode:
     GOAL p_g - p; PASS-sigma max(0.85, s_i) d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a
-    relevant obstacle; s_i its along-track distance, see the module docstring); SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
+    relevant obstacle or when it is part of a group; s_i its along-track distance, see the module docstring);
+    SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
     YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
     ``groups``: labels from :func:`obstacle_groups` (computed here when not given)."""
     mode_idx = np.asarray(mode_idx, int)
@@ -175,7 +179,11 @@ def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=N
             groups = obstacle_groups(obs_p, obs_r, params)
         ext = group_extent(sigma, j, c, obs_r, groups)
         lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(ext, r_rel, j >= 0, params), lateral)
-        forward = np.where(IS_PASS[mode_idx] & (j >= 0), np.maximum(forward, s_rel), forward)
+        groups = np.asarray(groups, int)
+        alone = np.zeros(len(j), bool)
+        if len(groups):
+            alone = np.bincount(groups)[groups][np.maximum(j, 0)] == 1          # the relevant one is a lone obstacle
+        forward = np.where(IS_PASS[mode_idx] & (j >= 0) & alone, np.maximum(forward, s_rel), forward)
     e = forward[:, None] * d_g + lateral[:, None] * n_g
     return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
 

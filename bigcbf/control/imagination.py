@@ -176,6 +176,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             groups = obstacle_groups(obstacles.p, r, params)
             lone = bool(np.all(np.bincount(groups) == 1))
             same_group = groups[:, None] == groups[None, :]
+            single = np.bincount(groups)[groups] == 1                  # (M,) alone in its group
 
     if start is None:
         p = np.full(B, complex(state.px, state.py))
@@ -220,8 +221,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             else:
                 ext = np.max(np.where(same_group[j], sigma[:, None] * z.imag + r[None, :], -np.inf), axis=1)
             off = has * np.maximum(np.maximum(d_min, ext + pass_extra), pass_floor[j])
-            # PASS aims beside the relevant obstacle: forward max(0.85, s_i) (behaviors.subgoal_error)
-            ahead = np.maximum(np.where(has, key.ravel()[flat], 0.0) - FORWARD_M[MODE_INDEX["PASS-L"]], 0.0)
+            # PASS aims beside a lone relevant obstacle: forward max(0.85, s_i) (behaviors.subgoal_error)
+            ahead = np.maximum(np.where(has & single[j], key.ravel()[flat], 0.0) - FORWARD_M[MODE_INDEX["PASS-L"]],
+                               0.0)
             coef = coef0 + pass_sig_j * off + pass_fwd * ahead
         e = dg * coef
         for gr in goal_rows:

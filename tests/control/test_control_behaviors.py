@@ -147,14 +147,15 @@ def test_release_velocity():
 def test_pass_clears_the_whole_group_of_a_wide_obstacle():
     """A wall 2 m wide across the goal line, seen as points of radius 0 every 0.2 m from y = -1 to 1 at x = 2:
     one group (gaps 0.2 < 2 (0.15 + 0.1) + 0.1). PASS-L aims past its left end: extent 1.0 (the point at y = 1),
-    d_pass = 1.0 + 0.15 + 0.35 = 1.5; PASS-R likewise -1.5. A lone point would give only max(0.3, 0.5, 0.5)."""
+    d_pass = 1.0 + 0.15 + 0.35 = 1.5; PASS-R likewise -1.5; forward 0.85 (a group). A lone point would give only
+    max(0.3, 0.5, 0.5), forward max(0.85, 2) = 2."""
     ys = np.linspace(-1.0, 1.0, 11)
     wall = Obstacles.from_lists(np.stack([np.full(11, 2.0), ys], 1), r=0.0, ids=-np.ones(11, int))
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), wall.p, wall.r, P)
-    np.testing.assert_allclose(e, [[2.0, 1.5], [2.0, -1.5]])     # forward: beside the wall, 2 m ahead
+    np.testing.assert_allclose(e, [[0.85, 1.5], [0.85, -1.5]])   # a group: the paper's 0.85 m forward
     lone = wall.subset([5])
     e1 = subgoal_error(mode_indices(("PASS-L",)), np.zeros((1, 2)), np.array([5.0, 0.0]), lone.p, lone.r, P)
-    np.testing.assert_allclose(e1, [[2.0, 0.5]])
+    np.testing.assert_allclose(e1, [[2.0, 0.5]])                  # a lone point: beside it, 2 m ahead
 
 
 def test_obstacle_groups_split_at_passable_gaps():
