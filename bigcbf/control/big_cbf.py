@@ -7,6 +7,7 @@ is replayed."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -33,7 +34,11 @@ class BigCbfPlanner:
     fallback and the rollouts' execution model (A, d of Eq. (1), which propagates the imagined robot in both), and
     the common CbfFilter with the full shared D_i^exec. The one difference is in ``imagine`` (and the fallback's
     release choice, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
-    of r_R + r_i + d0 + kappa_img m_i. kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
+    of r_R + r_i + d0 + kappa_img m_i, and, following from it, the band within which an obstacle counts as "in the
+    way" of the straight line to the goal (``behaviors``: ``in_way_margin_m``, about BIG-CBF's static kappa_img m_i,
+    is ``noshared_margin_m`` for NoShared: with BIG-CBF's 0.15 m band and its own 0.30 m barrier, NoShared's PASS
+    ignored the obstacles its barrier rejected GOAL for, and it timed out in 49 of 50 double squeezes where it had
+    timed out in 22). kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
     the shared m_i, which NoShared does not use ("a fixed 0.30 m margin", also with the hardware preset's
     kappa_img = 0.8).
 
@@ -42,6 +47,8 @@ class BigCbfPlanner:
     """
 
     def __init__(self, params: StackParams, *, shared: bool = True):
+        if not shared:      # the band that makes an obstacle "in the way" (behaviors) is the imagination's margin
+            params = replace(params, in_way_margin_m=params.noshared_margin_m)
         self.params = params
         self.shared = shared
         self.name = "big-cbf" if shared else "big-cbf-noshared"

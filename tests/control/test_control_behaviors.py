@@ -175,3 +175,19 @@ def test_release_from_a_moving_obstacle_is_sideways():
     v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[-0.2, 0.4]]), np.array([0.25]), P,
                          obs_v=np.array([[0.0, -1.0]]))
     np.testing.assert_allclose(v, [[0.3, 0.0]], atol=1e-12)
+
+
+def test_the_in_way_band_is_each_variants_imagination_margin():
+    """BIG-CBF: in_way_margin_m (0.15 m); NoShared: its fixed imagination margin (0.30 m). An obstacle (1.5, 0.6),
+    r 0.1, is in the way of NoShared's straight line (0.6 < 0.15 + 0.1 + 0.1 + 0.30 = 0.65), which its barrier
+    (D = 0.65) would reject, but not of BIG-CBF's (0.6 > 0.5)."""
+    from bigcbf.control.big_cbf import BigCbfPlanner
+
+    shared, noshared = BigCbfPlanner(P).params, BigCbfPlanner(P, shared=False).params
+    assert shared.in_way_margin_m == P.in_way_margin_m == 0.15
+    assert noshared.in_way_margin_m == P.noshared_margin_m == 0.30
+    obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
+    p = np.zeros((1, 2))
+    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
+    assert relevant_obstacle(p, d, n, obs.p, obs.r, shared)[0].tolist() == [-1]
+    assert relevant_obstacle(p, d, n, obs.p, obs.r, noshared)[0].tolist() == [0]
