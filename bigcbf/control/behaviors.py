@@ -15,7 +15,7 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   goal would bring the footprint closer than d0 + 0.15 m to it, about the imagination's own margin for a static
   obstacle (the barrier test of Eq. (16)). Wall points (radius 0) take part like any obstacle. (With d_pass_min,
   0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS steered
-  around the outside of one of them, into it: docs/fidelity.md, "Liveness".)
+  around the outside of one of them, into it: docs/fidelity.md, "Behavior imagination and selection".)
 * The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or, for a relevant obstacle alone in
   its group (one the footprint can pass on either side: a post, a person), its along-track distance s_i when that
   is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass aims at the point beside the

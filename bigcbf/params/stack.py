@@ -168,7 +168,7 @@ class StackParams:
       kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way" when
       the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
       barrier test of Eq. (16); it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
-      way" of a robot centred in it (docs/fidelity.md, "Liveness").
+      way" of a robot centred in it (docs/fidelity.md, "Behavior imagination and selection").
     - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
       (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
     - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior viable):
