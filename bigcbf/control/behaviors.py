@@ -113,6 +113,13 @@ def obstacle_groups(obs_p, obs_r, params: StackParams) -> np.ndarray:
     return connected_components(gap < 2 * (unc.r_robot_m + unc.d0_m) + 0.1, directed=False)[1]
 
 
+def alone_in_group(groups) -> np.ndarray:
+    """(M,) bool: obstacle i is the only member of its group (:func:`obstacle_groups`), one the footprint can pass
+    on either side; PASS aims beside such an obstacle (module docstring)."""
+    groups = np.asarray(groups, int)
+    return np.bincount(groups)[groups] == 1 if len(groups) else np.zeros(0, bool)
+
+
 def group_extent(sigma, j, c, obs_r, groups) -> np.ndarray:
     """max_{m in G(j_b)} (sigma_b c_{b,m} + r_m) per row b: how far the relevant obstacle's group reaches
     towards side sigma_b, measured from the robot across the goal line. c (B, M); j (B,), -1 for none (0)."""
@@ -179,11 +186,9 @@ def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=N
             groups = obstacle_groups(obs_p, obs_r, params)
         ext = group_extent(sigma, j, c, obs_r, groups)
         lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(ext, r_rel, j >= 0, params), lateral)
-        groups = np.asarray(groups, int)
-        alone = np.zeros(len(j), bool)
-        if len(groups):
-            alone = np.bincount(groups)[groups][np.maximum(j, 0)] == 1          # the relevant one is a lone obstacle
-        forward = np.where(IS_PASS[mode_idx] & (j >= 0) & alone, np.maximum(forward, s_rel), forward)
+        alone = alone_in_group(groups)
+        lone_rel = (j >= 0) & alone[np.maximum(j, 0)] if len(alone) else np.zeros(len(j), bool)
+        forward = np.where(IS_PASS[mode_idx] & lone_rel, np.maximum(forward, s_rel), forward)
     e = forward[:, None] * d_g + lateral[:, None] * n_g
     return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
 

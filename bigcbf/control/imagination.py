@@ -27,8 +27,8 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
-                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, goal_basis, mode_indices,
-                        obstacle_groups, release_directions_c, release_velocity, speed_limits)
+                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, alone_in_group, goal_basis,
+                        mode_indices, obstacle_groups, release_directions_c, release_velocity, speed_limits)
 from .faults import perception_fault
 from .governor import govern_c, obstacle_sigma_term
 from .prediction import predict_obstacles, q_sigma_for
@@ -174,9 +174,9 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
             gov_rows = np.flatnonzero(K.governed)
         if any_pass:     # the relevant obstacle's group (Eq. (7) d_pass), from the obstacles at k = 0
             groups = obstacle_groups(obstacles.p, r, params)
-            lone = bool(np.all(np.bincount(groups) == 1))
+            single = alone_in_group(groups)                            # (M,) alone in its group
+            lone = bool(single.all())
             same_group = groups[:, None] == groups[None, :]
-            single = np.bincount(groups)[groups] == 1                  # (M,) alone in its group
 
     if start is None:
         p = np.full(B, complex(state.px, state.py))
@@ -194,6 +194,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     THk[:] = th
     d_min, v_rel, eps_g = params.d_pass_min_m, params.v_release_mps, params.eps_g_m
     coef0, pass_sig_j, goal_rows, pass_fwd = K.coef0, K.pass_sig_j, K.goal_rows, K.pass_f
+    pass_fwd0 = FORWARD_M[MODE_INDEX["PASS-L"]]     # eq:behavior_subgoals's 0.85 m
     gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
     if M:
         pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
@@ -222,8 +223,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                 ext = np.max(np.where(same_group[j], sigma[:, None] * z.imag + r[None, :], -np.inf), axis=1)
             off = has * np.maximum(np.maximum(d_min, ext + pass_extra), pass_floor[j])
             # PASS aims beside a lone relevant obstacle: forward max(0.85, s_i) (behaviors.subgoal_error)
-            ahead = np.maximum(np.where(has & single[j], key.ravel()[flat], 0.0) - FORWARD_M[MODE_INDEX["PASS-L"]],
-                               0.0)
+            ahead = np.maximum(np.where(has & single[j], key.ravel()[flat], 0.0) - pass_fwd0, 0.0)
             coef = coef0 + pass_sig_j * off + pass_fwd * ahead
         e = dg * coef
         for gr in goal_rows:

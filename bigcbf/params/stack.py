@@ -167,7 +167,8 @@ class StackParams:
       Eq. (7), see ``bigcbf.control.behaviors``. ``in_way_margin_m`` (0.15 m, about the imagination's margin
       kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way" when
       the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
-      barrier test of Eq. (16); it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
+      barrier test of Eq. (16) (BIG-CBF-NoShared uses its own imagination margin, ``noshared_margin_m``, instead);
+      it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
       way" of a robot centred in it (docs/fidelity.md, "Behavior imagination and selection").
     - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
       (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.

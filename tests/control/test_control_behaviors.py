@@ -191,3 +191,11 @@ def test_the_in_way_band_is_each_variants_imagination_margin():
     d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
     assert relevant_obstacle(p, d, n, obs.p, obs.r, shared)[0].tolist() == [-1]
     assert relevant_obstacle(p, d, n, obs.p, obs.r, noshared)[0].tolist() == [0]
+
+
+def test_alone_in_group_by_hand():
+    """Groups [0, 0, 1, 2, 2, 3]: obstacles 2 and 5 are alone; an empty scan has none."""
+    from bigcbf.control.behaviors import alone_in_group
+
+    assert alone_in_group([0, 0, 1, 2, 2, 3]).tolist() == [False, False, True, False, False, True]
+    assert alone_in_group(np.zeros(0, int)).shape == (0,)
