@@ -158,8 +158,10 @@ class Overlay:
         if rec.cbf_active:
             frame[-8:, :] = CBF_ACTIVE_RGB
         items = self.legend(img is not None, rec.path is not None)
-        if self.legend_style == "strip":
-            return with_legend_strip(frame, items)
+        if self.legend_style == "strip":     # room for the largest legend: every frame of a video has one size
+            every = [lab for lab, _, _ in self.legend(True, False)] + [lab for lab, _, _ in self.legend(False, True)
+                                                                        if lab not in {"goal", "robot, trail"}]
+            return with_legend_strip(frame, items, reserve=list(dict.fromkeys(every)))
         if self.legend_style == "box":
             draw_legend(frame, items)
         return frame
@@ -219,8 +221,16 @@ class EpisodeVideo:
             self.abort()
 
 
+def _pad_to(frame: np.ndarray, height: int) -> np.ndarray:
+    """``frame`` with dark rows added below it up to ``height`` (tiles of a side-by-side video differ in height)."""
+    if frame.shape[0] >= height:
+        return frame
+    return np.vstack([frame, np.full((height - frame.shape[0], *frame.shape[1:]), 24, np.uint8)])
+
+
 def side_by_side(inputs: list[str | Path], out: str | Path, fps: float) -> int:
-    """Compose videos left to right (a finished one holds its last frame). Returns the frame count."""
+    """Compose videos left to right (a finished one holds its last frame; a shorter tile is padded below to the
+    tallest one's height). Returns the frame count."""
     import imageio_ffmpeg
     readers = [imageio_ffmpeg.read_frames(str(p)) for p in inputs]
     metas = [next(r) for r in readers]
@@ -241,7 +251,7 @@ def side_by_side(inputs: list[str | Path], out: str | Path, fps: float) -> int:
             if all(done):
                 break
             h = max(s[1] for s in sizes)
-            tiles = [f if f is not None else np.zeros((h, s[0], 3), np.uint8) for f, s in zip(last, sizes)]
+            tiles = [_pad_to(f if f is not None else np.zeros((h, s[0], 3), np.uint8), h) for f, s in zip(last, sizes)]
             vw.write(np.hstack(tiles))
             n += 1
     return n

@@ -194,24 +194,36 @@ def _swatch(img: np.ndarray, kind: str, x: int, yc: int, col) -> None:
         cv2.line(img, (x, yc), (x + 22, yc), col, 3 if kind == "thick" else 1, cv2.LINE_AA)
 
 
-def with_legend_strip(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], scale: float = 0.4,
-                      multiple: int = 16) -> np.ndarray:
-    """The frame with a legend band below it (so the legend never hides the scene): the items (label, rgba in
-    [0, 1], kind as in :func:`draw_legend`) flow left to right in rows; the band's height makes the frame's height
-    a multiple of ``multiple`` (H.264 macroblocks)."""
-    items = list(items)
-    h, w = frame.shape[:2]
-    sizes = [cv2.getTextSize(lab, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0] for lab, _, _ in items]
+def _legend_rows(labels: list[str], width: int, scale: float) -> tuple[list, list, int]:
+    """The legend's layout: (rows of (item index, x), text sizes, row height) for items flowing left to right."""
+    sizes = [cv2.getTextSize(lab, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0] for lab in labels]
     row_h = max((s[1] for s in sizes), default=10) + 10
     rows, x = [[]], 8
     for k, (tw, _) in enumerate(sizes):
         item_w = 30 + tw + 16
-        if x + item_w > w and rows[-1]:
+        if x + item_w > width and rows[-1]:
             rows.append([])
             x = 8
         rows[-1].append((k, x))
         x += item_w
-    band_h = len(rows) * row_h + 8
+    return rows, sizes, row_h
+
+
+def with_legend_strip(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], scale: float = 0.4,
+                      multiple: int = 16, reserve: Iterable[str] = ()) -> np.ndarray:
+    """The frame with a legend band below it (so the legend never hides the scene): the items (label, rgba in
+    [0, 1], kind as in :func:`draw_legend`) flow left to right in rows; the band's height makes the frame's height
+    a multiple of ``multiple`` (H.264 macroblocks). ``reserve``: labels whose layout the band must also have room
+    for, so that every frame of a video has one size whichever items a frame shows (a video's frames must)."""
+    items = list(items)
+    h, w = frame.shape[:2]
+    rows, sizes, row_h = _legend_rows([lab for lab, _, _ in items], w, scale)
+    reserve = list(reserve)
+    n_rows = len(rows)
+    if reserve:
+        r_rows, _, r_row_h = _legend_rows(reserve, w, scale)
+        n_rows, row_h = max(n_rows, len(r_rows)), max(row_h, r_row_h)
+    band_h = n_rows * row_h + 8
     band_h += (-(h + band_h)) % multiple
     band = np.full((band_h, w, 3), 24, np.uint8)
     for r, row in enumerate(rows):
