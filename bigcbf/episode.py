@@ -24,6 +24,7 @@ from .control.methods import make_planner
 from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
 from .control.prediction import age_obstacles
+from .errors import UserError
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
@@ -107,6 +108,57 @@ class StepRecord:
     D: np.ndarray
     path: np.ndarray | None
     scan: object | None
+
+
+def checked_plan(method: str, out, t: float) -> tuple[np.ndarray, PlanInfo]:
+    """A planner's ``plan()`` result ``out`` checked against the protocol (bigcbf/control/planner.py) before the CBF
+    filter sees it: a tuple (u_in, info) with u_in 3 finite numbers (vx, vy, wz) and info a PlanInfo (a str mode,
+    a finite planner_ms >= 0, a path None or (K, 2) finite). A user's planner that breaks it gets a UserError naming
+    the method and what was wrong, not a traceback from deep in the filter. Returns (u_in as a float array, info)."""
+    def bad(what: str) -> UserError:
+        return UserError(f"method {method!r}: plan() {what} (at t = {t:.2f} s; the planner protocol: "
+                         "bigcbf/control/planner.py, docs/extending.md)")
+
+    if not isinstance(out, tuple) or len(out) != 2:
+        got = f"a tuple of {len(out)}" if isinstance(out, tuple) else f"{type(out).__name__} {_short(out)}"
+        raise bad(f"returned {got}, expected a tuple (u_in, PlanInfo)")
+    u, info = out
+    try:
+        u = np.asarray(u, dtype=float)
+    except (TypeError, ValueError):
+        raise bad(f"returned a command that is not numbers ({type(u).__name__} {_short(u)}), expected 3 numbers "
+                  "(vx, vy, wz)") from None
+    if u.shape != (3,):
+        raise bad(f"returned a command of shape {u.shape}, expected 3 numbers (vx, vy, wz)")
+    if not np.isfinite(u).all():
+        raise bad(f"returned a command that is not finite ({_short(u.tolist())}), expected 3 finite numbers "
+                  "(vx, vy, wz)")
+    if not isinstance(info, PlanInfo):
+        raise bad(f"returned {type(info).__name__} {_short(info)} as its info, expected a "
+                  "bigcbf.control.planner.PlanInfo")
+    if not isinstance(info.mode, str):
+        raise bad(f"returned PlanInfo.mode = {_short(info.mode)}, expected a string (its mode label)")
+    ms = info.planner_ms
+    if isinstance(ms, bool) or not isinstance(ms, (int, float, np.floating, np.integer)) or not (
+            np.isfinite(ms) and ms >= 0):
+        raise bad(f"returned PlanInfo.planner_ms = {_short(ms)}, expected a finite number of milliseconds >= 0")
+    if info.path is not None:
+        path = np.asarray(info.path)
+        if path.ndim != 2 or path.shape[1:] != (2,) or not np.issubdtype(path.dtype, np.number) \
+                or not np.isfinite(path).all():
+            raise bad(f"returned PlanInfo.path of shape {path.shape} ({path.dtype}), expected None or finite "
+                      "(K, 2) points in odom [m]")
+    if info.margins_img is not None:
+        m = np.asarray(info.margins_img)
+        if m.ndim != 1 or not np.issubdtype(m.dtype, np.number) or not np.isfinite(m).all():
+            raise bad(f"returned PlanInfo.margins_img of shape {m.shape} ({m.dtype}), expected None or a flat "
+                      "array of finite margins [m]")
+    return u, info
+
+
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 class Episode:
@@ -229,7 +281,7 @@ class Episode:
         w, state = self.world, self.state
         obs_now = self.obstacles_now()
         if u_in is None:
-            u_in, pinfo = self.planner.plan(w.t, state, obs_now, self.goal)
+            u_in, pinfo = checked_plan(self.method, self.planner.plan(w.t, state, obs_now, self.goal), w.t)
         else:
             u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
         u_safe, finfo = self.cbf.filter(state, obs_now, u_in)

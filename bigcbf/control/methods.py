@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..params.stack import StackParams
-from ..registry import Registry
+from ..registry import Registry, check_protocol_factory
 from ..types import Obstacles, RobotState
 from .behaviors import behavior_command
 from .big_cbf import BigCbfPlanner
@@ -100,8 +100,8 @@ def _import_factory(spec: str, what: str) -> Callable:
         if not hasattr(obj, part):
             raise UserError(f"{what}: module {mod_name!r} has no attribute {attr!r}")
         obj = getattr(obj, part)
-    if not callable(obj):
-        raise UserError(f"{what}: {spec!r} is not callable (a planner class or a factory(params) -> planner)")
+    name = "it" if repr(spec) in what else repr(spec)
+    check_protocol_factory(obj, ("reset", "plan"), "planner", what, name)
     return obj
 
 
