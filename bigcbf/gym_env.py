@@ -1,34 +1,51 @@
 """A Gymnasium environment of an episode: the MuJoCo scene with the common hard CBF filter in the loop.
 
     import gymnasium as gym
-    import bigcbf.gym_env                                  # registers bigcbf/Navigation-v0
-    env = gym.make("bigcbf/Navigation-v0", scenario="crowd_crossing")
+    env = gym.make("bigcbf.gym_env:bigcbf/Navigation-v0", scenario="crowd_crossing")   # imports and registers
     obs, info = env.reset(seed=0)                          # seed s: the world bigcbf run draws for --seed s
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
-(``pip install 'bigcbf[gym]'``.) Each step is one control period T_C of :class:`bigcbf.episode.Episode`: the agent's
-action is the input command u_in, which goes through the same CBF-QP filter (Eq. (19)) as every method's, then the
-robot's firmware and the physics run up to the next control tick (scans and perception on the way, as in
-``bigcbf run``). There is no second simulation loop: the environment drives ``Episode.begin`` and
-``Episode.act(u_in)``.
+(``pip install 'bigcbf[gym]'``.) Gymnasium 1.x has no plugin system (1.0 removed the ``gymnasium.envs`` entry
+points that 0.26-0.29 loaded on import), so a fresh interpreter finds ``bigcbf/Navigation-v0`` either through the
+``module:id`` form above, which imports this module first, or after ``import bigcbf.gym_env`` (optionally
+``gym.register_envs(bigcbf.gym_env)``), which registers it. Each step is one control period T_C of
+:class:`bigcbf.episode.Episode`: the agent's action is the input command u_in, which goes through the same CBF-QP
+filter (Eq. (19)) as every method's, then the robot's firmware and the physics run up to the next control tick
+(scans and perception on the way, as in ``bigcbf run``). There is no second simulation loop: the environment
+drives ``Episode.begin`` and ``Episode.act(u_in)``.
 
-- action: u_in = (vx [m/s], vy [m/s], wz [rad/s]), a body twist in the actuator box [u_min, u_max] of the stack
-  parameters (clipped to it).
-- observation (a Dict): ``scan`` the latest LiDAR ranges (n_beams, float32, m; beams without a return as
-  ``range_max``), ``odom`` the stack's state [px, py, theta, vx, vy, wz] (wheel odometry, pose in odom, twist in
-  base_link; the true state with ``perception="truth"``), ``goal`` the goal [x, y] in odom.
+- action: u_in = (vx [m/s], vy [m/s], wz [rad/s]), a body twist; ``action_space`` is the actuator box
+  [u_min, u_max] of the stack parameters. An action inside the box is sent as it is; one outside it is clipped to
+  the box, axis by axis (as the robot's actuator limits would; Gymnasium's ``ClipAction`` convention), and
+  ``info["u_in"]`` is the clipped command the filter received. An action that is not 3 numbers (shape (3,)) or
+  has a NaN or infinite entry raises :class:`bigcbf.errors.UserError` naming ``action``.
+- observation (a Dict): ``scan`` the latest LiDAR ranges of the scenario's robot profile (``[lidar]`` of
+  ``bigcbf/profiles/x3_sim.toml`` or the scenario's ``[robot_profile.lidar]``: its ``n_beams`` beams, float32, m;
+  beams without a return as its ``range_max_m``), ``odom`` the stack's state [px, py, theta, vx, vy, wz] (wheel
+  odometry, pose in odom, twist in base_link; the true state with ``perception="truth"``), ``goal`` the goal
+  [x, y] in odom. The spaces are built from the LiDAR the scenario's robot has (its world for seed 0); a
+  scenario that draws ``n_beams`` or ``range_max_m`` per seed gets a UserError at the reset of a seed whose
+  LiDAR differs (an observation space is fixed).
 - reward (the paper has none; a choice documented here, weights in :class:`RewardWeights`): the progress towards
   the goal over the step (true distance, m) minus ``cbf_weight`` times the step's CBF intervention
   ||u_safe - u_in||^2_R (the term of E_CBF, Eq. (20)), plus ``success`` on reaching the goal region, minus
   ``collision`` on contact.
 - terminated: goal reached or collision; truncated: the scenario's time limit.
 - info: the episode's metrics so far (:class:`bigcbf.episode.EpisodeResult` without its wall-clock timings, which
-  differ between identical runs), plus ``u_safe`` (the filtered command sent) and ``cbf_active``.
+  differ between identical runs), plus ``u_in`` (the command the filter received), ``u_safe`` (the filtered
+  command sent) and ``cbf_active``.
 - render_mode ``rgb_array``: the frame of ``bigcbf run --video`` (camera ``top`` or ``track``).
+
+Bad arguments raise :class:`bigcbf.errors.UserError` (one line naming the field), checked as the CLI and
+:mod:`bigcbf.api` check them: the scenario (a name or a TOML file, loaded and checked whole by the constructor),
+``config``, ``perception``, ``time_limit_s`` (the rule of a scenario file's ``time_limit_s``: in (0, 600] s),
+``render_mode``, ``camera``, ``width``/``height`` (whole numbers in [16, 4096] px), and ``reset(seed=...)``: a
+whole number in [0, 4294967295], the range of ``bigcbf run --seed``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, replace
 from typing import Any
 
 import gymnasium as gym
@@ -36,7 +53,8 @@ import numpy as np
 from gymnasium import spaces
 
 from .config import RunConfig
-from .episode import DETERMINISTIC_KEYS, Episode, StepRecord
+from .episode import DETERMINISTIC_KEYS, PERCEPTION_MODES, Episode, StepRecord
+from .errors import UserError
 from .sim.lidar import LidarConfig
 
 ENV_ID = "bigcbf/Navigation-v0"
@@ -44,6 +62,9 @@ ENV_ID = "bigcbf/Navigation-v0"
 #: bounds of the odometry and goal observations (finite, so that Gymnasium's checks pass; far beyond any scene)
 POSITION_BOUND_M = 1000.0
 SPEED_BOUND = 10.0
+#: the cameras of ``bigcbf run --video`` and the frame sizes the renderer takes [px]
+CAMERAS = ("top", "track")
+FRAME_SIZE_PX = (16, 4096)
 
 
 @dataclass(frozen=True)
@@ -52,6 +73,35 @@ class RewardWeights:
     cbf_weight: float = 1.0           # penalty per unit of ||u_safe - u_in||^2_R (Eq. (20)) in a step
     success: float = 10.0             # on reaching the goal region
     collision: float = 10.0           # penalty on contact
+
+
+def check_seed(seed) -> int:
+    """A seed as ``bigcbf run --seed`` takes it (``cli.argtypes.nonneg_int``: a whole number in [0, MAX_SEED]),
+    else a UserError naming ``seed``."""
+    import argparse
+
+    from .cli.argtypes import nonneg_int
+
+    whole = isinstance(seed, (numbers.Integral, np.integer)) and not isinstance(seed, (bool, np.bool_))
+    try:                                   # repr of a non-integer (1.5, '3') is never a whole number to int()
+        return nonneg_int(str(int(seed)) if whole else repr(seed))
+    except argparse.ArgumentTypeError as exc:
+        raise UserError(str(exc), field="seed") from None
+
+
+def check_time_limit(scenario, time_limit_s) -> float:
+    """An episode's time limit checked as a scenario file's ``time_limit_s`` is (the file loader's number check, then
+    ``Scenario``'s: in (0, 600] s), else a UserError naming ``time_limit_s``."""
+    from .errors import FieldError
+    from .params.toml_io import _convert
+
+    if isinstance(time_limit_s, (np.integer, np.floating)):
+        time_limit_s = time_limit_s.item()
+    v = _convert(float, time_limit_s, None, "time_limit_s")     # a finite number, as from_dict converts the file's
+    try:
+        return replace(scenario, time_limit_s=v).time_limit_s
+    except FieldError as exc:
+        raise UserError(str(exc), field=exc.field) from None
 
 
 class NavigationEnv(gym.Env):
@@ -63,17 +113,32 @@ class NavigationEnv(gym.Env):
                  perception: str = "lidar", time_limit_s: float | None = None, render_mode: str | None = None,
                  camera: str = "top", width: int = 480, height: int = 360, reward: RewardWeights = RewardWeights()):
         from .api import load_config
-        from .scenario import resolve_path
+        from .scenario import load_scenario
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None")
-        resolve_path(scenario)                      # a UserError now rather than at the first reset
-        self.scenario, self.perception, self.time_limit_s = str(scenario), perception, time_limit_s
+            raise UserError(f"must be one of {', '.join(self.metadata['render_modes'])} or None, got "
+                            f"{render_mode!r}"[:160], field="render_mode")
+        if perception not in PERCEPTION_MODES:
+            raise UserError(f"perception must be one of {', '.join(PERCEPTION_MODES)}, got {perception!r}"[:160])
+        if camera not in CAMERAS:
+            raise UserError(f"must be one of {', '.join(CAMERAS)}, got {camera!r}"[:160], field="camera")
+        for name, px in (("width", width), ("height", height)):
+            if not (isinstance(px, (numbers.Integral, np.integer)) and not isinstance(px, bool)
+                    and FRAME_SIZE_PX[0] <= px <= FRAME_SIZE_PX[1]):
+                raise UserError(f"expected a whole number of pixels in [{FRAME_SIZE_PX[0]}, {FRAME_SIZE_PX[1]}], "
+                                f"got {px!r}"[:160], field=name)
+        # the whole file checked now (a UserError here rather than at the first reset); its robot (seed 0's world)
+        # gives the observation space
+        sc = load_scenario(scenario, 0)
+        self.scenario, self.perception = str(scenario), perception
+        self.time_limit_s = None if time_limit_s is None else check_time_limit(sc, time_limit_s)
         self.config = load_config(config)
-        self.render_mode, self.camera, self.width, self.height = render_mode, camera, width, height
+        self.render_mode, self.camera, self.width, self.height = render_mode, camera, int(width), int(height)
         self.reward_weights = reward
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.config.stack.T_C_s))}
-        stack, lidar = self.config.stack, LidarConfig()
+        # the LiDAR the episode's world builds (SimWorld without a lidar argument: the robot profile's model)
+        stack, lidar = self.config.stack, LidarConfig.from_model(sc.robot_profile.lidar)
+        self.lidar = lidar
         self.action_space = spaces.Box(np.asarray(stack.u_min, np.float32), np.asarray(stack.u_max, np.float32),
                                        dtype=np.float32)
         b = POSITION_BOUND_M
@@ -91,13 +156,18 @@ class NavigationEnv(gym.Env):
 
     # --- Gymnasium API ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        from .cli.argtypes import MAX_SEED
         from .scenario import load_scenario
 
+        seed = None if seed is None else check_seed(seed)
         super().reset(seed=seed)
-        ep_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        ep_seed = seed if seed is not None else int(self.np_random.integers(0, MAX_SEED, endpoint=True))
         self._close_renderer()
-        ep = Episode.from_config(load_scenario(self.scenario, ep_seed), None, ep_seed, self.config,
-                                 perception=self.perception, time_limit_s=self.time_limit_s)
+        self.episode = None
+        sc = load_scenario(self.scenario, ep_seed)
+        self._check_lidar(sc, ep_seed)
+        ep = Episode.from_config(sc, None, ep_seed, self.config, perception=self.perception,
+                                 time_limit_s=self.time_limit_s)
         ep.begin()
         self.episode, self._rec = ep, None
         if self.render_mode == "rgb_array":            # the overlay follows every step (the robot's trail)
@@ -114,8 +184,7 @@ class NavigationEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if ep.done:
             raise RuntimeError("the episode is over: call reset()")
-        u_in = np.clip(np.asarray(action, np.float64).reshape(3), self.action_space.low, self.action_space.high)
-        rec = ep.act(u_in)
+        rec = ep.act(self._u_in(action))
         self._rec = rec
         if self._overlay is not None:
             self._overlay.observe(rec)
@@ -141,6 +210,31 @@ class NavigationEnv(gym.Env):
         self.episode = None
 
     # --- helpers ----------------------------------------------------------------------------------------------
+    def _u_in(self, action) -> np.ndarray:
+        """The agent's action as u_in: 3 finite numbers (else a UserError naming ``action``), clipped to the
+        actuator box [u_min, u_max] (module docstring)."""
+        try:
+            u = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise UserError(f"expected 3 numbers (vx [m/s], vy [m/s], wz [rad/s]), got {action!r}"[:160],
+                            field="action") from None
+        if u.shape != (3,):
+            raise UserError(f"expected 3 numbers (vx [m/s], vy [m/s], wz [rad/s]), shape (3,), got shape {u.shape}",
+                            field="action")
+        if not np.isfinite(u).all():
+            raise UserError(f"expected finite numbers, got {u.tolist()}", field="action")
+        stack = self.config.stack
+        return np.clip(u, np.asarray(stack.u_min, np.float64), np.asarray(stack.u_max, np.float64))
+
+    def _check_lidar(self, sc, seed: int) -> None:
+        """The LiDAR of this seed's robot is the one the observation space was built from."""
+        got = (sc.robot_profile.lidar.n_beams, float(sc.robot_profile.lidar.range_max_m))
+        want = (self.lidar.n_beams, float(self.lidar.range_max_m))
+        if got != want:
+            raise UserError(f"seed {seed} draws a LiDAR of {got[0]} beams, {got[1]:g} m, where seed 0's (the "
+                            f"observation space's) has {want[0]} beams, {want[1]:g} m: the environment needs one "
+                            "n_beams and range_max_m for every seed", file=sc.file, field="robot_profile.lidar")
+
     def _state(self):
         w = self.episode.world
         return w.odom() if self.perception == "lidar" else w.true_state()
@@ -161,6 +255,7 @@ class NavigationEnv(gym.Env):
     def _info(self, rec: StepRecord | None = None) -> dict:
         m = self.episode.result().metrics()
         info = {k: m[k] for k in ("scenario", "method", "seed", "perception", *DETERMINISTIC_KEYS)}
+        info["u_in"] = np.zeros(3) if rec is None else np.asarray(rec.u_in, float).copy()
         info["u_safe"] = np.zeros(3) if rec is None else np.asarray(rec.u_safe, float).copy()
         info["cbf_active"] = False if rec is None else bool(rec.cbf_active)
         return info
