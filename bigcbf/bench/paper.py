@@ -94,3 +94,70 @@ PAPER_TABLE_III: dict[str, dict[str, float | int | None]] = {
 
 #: The hardware scenes of Sec. V in the order of the paper's Fig. 7, (a)-(c): our lab-scale scenario names.
 HARDWARE_SCENARIO_ORDER = ("lab_required_sidestepping", "lab_static_clutter", "lab_pedestrian_crossing")
+
+
+# --- when our figures may stand beside the paper's -----------------------------------------------------------------
+
+#: The paper's seeds per scene (Sec. IV-A: "the same 50 random seeds"; Table II: 450 episodes per method).
+PAPER_SEEDS = 50
+
+
+def shipped_scene_keys(names) -> dict[str, str]:
+    """The bench's scenario key (:func:`bigcbf.bench.tasks.scenario_key`: the file's text and its base robot
+    profile's text) of each shipped scene among ``names``: a bench row whose ``scenario_sha`` equals it ran that very
+    file, whatever the name; a user's copy with other content differs."""
+    from ..scenario import all_scenario_files, base_profile_text
+    from .tasks import scenario_key
+
+    files = all_scenario_files()
+    out = {}
+    for n in names:
+        if n in files:
+            _, profile = base_profile_text(files[n])
+            out[n] = scenario_key(files[n].read_text(), profile)
+    return out
+
+
+def comparability(rows, scenarios, seeds, suite: str | None, default_params_hash: str | None) -> dict:
+    """Whether this bench's figures may be shown beside the paper's, and why not.
+
+    Table II (and the per-scene success the paper's text quotes) compare with the paper's own benchmark: 50 seeds
+    of each of the nine scenes, every method with the same defaults. Ours stand beside them only when the bench ran
+    the shipped scene files -- matched by content (the episode key's scenario hash), not by name --, at the paper's
+    50 seeds, with the default run configuration. Table III (the hardware suite) needs the three shipped lab scenes
+    by content and the defaults of that suite (its own seed count: the paper's 15 trials are physical runs, which
+    no seed count reproduces). Returns ``{"table_ii": {"comparable", "why"}, "scenes": [names whose quoted
+    figures may be shown], "table_iii": {"comparable", "why"}}``."""
+    scenarios, n_seeds = list(scenarios), len(list(seeds))
+    keys = shipped_scene_keys(scenarios)
+    ran = {}
+    hashes = set()
+    for r in rows:
+        ran.setdefault(r["scenario"], set()).add(r.get("scenario_sha"))
+        hashes.add(r.get("params_hash"))
+    same = [s for s in scenarios if s in keys and ran.get(s) == {keys[s]}]
+    default = default_params_hash is not None and hashes <= {default_params_hash}
+
+    def verdict(wanted, need_seeds: bool) -> dict:
+        why = []
+        missing = [s for s in wanted if s not in scenarios]
+        if missing:
+            why.append(f"{len(missing)} of the paper's {len(wanted)} scenes not in this bench")
+        edited = [s for s in wanted if s in scenarios and s not in same]
+        if edited:
+            why.append("not the shipped file (by content): " + ", ".join(edited))
+        extra = [s for s in scenarios if s not in wanted]
+        if extra:
+            why.append("scenes the paper does not have: " + ", ".join(extra))
+        if need_seeds and n_seeds != PAPER_SEEDS:
+            why.append(f"{n_seeds} seed{'s' if n_seeds != 1 else ''} per scene, the paper's {PAPER_SEEDS}")
+        if not default:
+            why.append("a run configuration other than the defaults (--config/--profile)")
+        return {"comparable": not why, "why": "; ".join(why)}
+
+    quoted = [s for s in same if s in PAPER_SCENARIO_SUCCESS] if n_seeds == PAPER_SEEDS and default else []
+    return {"table_ii": verdict(SCENARIO_ORDER, True) if suite != "hardware" else
+            {"comparable": False, "why": "the hardware suite compares with Table III"},
+            "scenes": quoted,
+            "table_iii": verdict(HARDWARE_SCENARIO_ORDER, False) if suite == "hardware" else
+            {"comparable": False, "why": "only the hardware suite compares with Table III"}}

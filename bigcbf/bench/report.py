@@ -43,7 +43,7 @@ from typing import Iterable, Sequence
 
 from ..errors import UserError
 from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
-from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
+from .paper import (METHOD_ORDER, comparability, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
                     TABLE2_KEYS, display, ordered)
 
 KEY_FIELDS = ("scenario", "method", "seed", "params_hash", "scenario_sha")
@@ -157,11 +157,28 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
                         for m in methods},
         "paper": {"table_ii": {m: PAPER_TABLE_II[m] for m in METHOD_ORDER},
                   "scenario_success_pct": PAPER_SCENARIO_SUCCESS,
-                  "table_iii": {m: PAPER_TABLE_III[m] for m in METHOD_ORDER}},
+                  "table_iii": {m: PAPER_TABLE_III[m] for m in METHOD_ORDER},
+                  "comparable": comparability(rows, scenarios, seeds, (info or {}).get("suite"),
+                                              default_params_hash((info or {}).get("suite"),
+                                                                  (info or {}).get("perception", "lidar")))},
         "error_episodes": [{k: r[k] for k in ("scenario", "method", "seed", "error")}
                            for r in rows if r["status"] == "error"],
         **extra,
     }
+
+
+def default_params_hash(suite: str | None, perception: str = "lidar") -> str | None:
+    """The episode key's parameter hash of a suite's default run configuration (the paper's and every other
+    suite's: RunConfig(); the hardware suite's: its physical preset), with LiDAR perception (the paper's); None for
+    another perception mode (never comparable with the paper)."""
+    from ..config import RunConfig
+    from .suites import SUITES
+    from .tasks import params_key, params_toml
+
+    if perception != "lidar":
+        return None
+    make = SUITES.get(suite).params if suite in SUITES else None
+    return params_key(params_toml(make() if make is not None else RunConfig()), perception)
 
 
 # --- episodes.csv --------------------------------------------------------------------------------------------------
@@ -296,10 +313,25 @@ def _errors_section(summary: dict, h: str, lines: list[str]) -> str:
             lines.append(f"- ... and {len(errs) - 50} more (see episodes.csv)")
     return "\n".join(lines) + "\n"
 
+def _verdict(summary: dict, table: str) -> dict:
+    """Whether the bench's figures may stand beside the paper's ``table`` (:func:`bigcbf.bench.paper.comparability`);
+    a summary.json written before that check existed is taken as not comparable, for want of evidence."""
+    comp = summary["paper"].get("comparable")
+    if comp is None:
+        return {"comparable": False, "why": "this summary predates the comparability check; run the bench again",
+                "scenes": []}
+    return {**comp[table], "scenes": comp.get("scenes", [])}
+
+
 def _table_iii_lines(summary: dict, methods: Sequence[str], h: str) -> list[str]:
     """Ours beside the paper's Table III (the hardware suite)."""
     per_m = summary["methods"]
     paper = summary["paper"]["table_iii"]
+    verdict = _verdict(summary, "table_iii")
+    if not verdict["comparable"]:
+        return [f"{h}# The paper's Table III", "",
+                f"Not comparable with the paper's Table III, so its figures are not shown beside these: "
+                f"{verdict['why']}. (`bigcbf bench --out DIR --suite hardware` runs its three scenes.)"]
     lines = [f"{h}# Ours beside the paper's Table III (hardware)", "",
              "Each pair is ours (the twin: the lab-scale scenes with a real X3-class robot profile and the physical "
              "preset) / the paper's (a physical X3, 15 supervised trials per method: three scenes x 5; its success "
@@ -324,6 +356,13 @@ def _table_ii_lines(summary: dict, methods: Sequence[str], scenarios: Sequence[s
     per_m, per_ms = summary["methods"], summary["by_scenario"]
     lines: list[str] = []
     paper = summary["paper"]["table_ii"]
+    verdict = _verdict(summary, "table_ii")
+    if not verdict["comparable"]:
+        lines += [f"{h}# The paper's Table II", "",
+                  f"Not comparable with the paper's Table II, so its figures are not shown beside these: "
+                  f"{verdict['why']}. (The paper: the nine scenes, 50 seeds each, every method with its defaults; "
+                  "`bigcbf bench --out DIR` runs exactly that.)"]
+        return lines
     lines += [f"{h}# Ours beside the paper's Table II", "",
               "Each pair is ours / the paper's (the paper: 450 episodes per method, its own simulator; collisions and "
               "planner P95 from its text; – where the paper gives no number).", ""]
@@ -333,7 +372,7 @@ def _table_ii_lines(summary: dict, methods: Sequence[str], scenarios: Sequence[s
     lines += _table(["Method"] + [c for c, _ in cols],
                     ([display(m)] + [f"{_f(per_m[m][k])} / {_f(paper.get(m, {}).get(k))}" for _, k in cols]
                      for m in methods))
-    quoted = [s for s in scenarios if s in summary["paper"]["scenario_success_pct"]]
+    quoted = [s for s in scenarios if s in summary["paper"]["scenario_success_pct"] and s in verdict["scenes"]]
     if quoted:
         pss = summary["paper"]["scenario_success_pct"]
         lines += ["", "Success per scenario where the paper's text quotes it, ours / the paper's (%):", ""]
@@ -487,7 +526,7 @@ def plot_burden(summary: dict, path: Path) -> None:
 
     methods = summary["bench"]["methods"]
     table = "table_iii" if summary["bench"].get("suite") == "hardware" else "table_ii"
-    paper = summary["paper"][table]
+    paper = summary["paper"][table] if _verdict(summary, table)["comparable"] else {}
     y = np.arange(len(methods))
     fig, axes = plt.subplots(1, 2, figsize=(10, 1.6 + 0.45 * len(methods)), dpi=150, sharey=True,
                              layout="constrained")
@@ -496,8 +535,9 @@ def plot_burden(summary: dict, path: Path) -> None:
         ours = np.array([np.nan if (v := summary["methods"][m][key]) is None else v for m in methods], float)
         ref = np.array([np.nan if (v := paper.get(m, {}).get(key)) is None else v for m in methods], float)
         ax.barh(y, np.nan_to_num(ours), color="tab:blue", alpha=0.8, label="ours")
-        ax.scatter(ref, y, marker="D", color="black", zorder=3,
-                   label="paper (Table III)" if table == "table_iii" else "paper (Table II)")
+        if paper:
+            ax.scatter(ref, y, marker="D", color="black", zorder=3,
+                       label="paper (Table III)" if table == "table_iii" else "paper (Table II)")
         for yi, v in zip(y, ours):
             if not np.isnan(v):
                 ax.text(v, yi + 0.32, f" {v:.2f}", va="center", fontsize=7, color="tab:blue")
@@ -511,8 +551,10 @@ def plot_burden(summary: dict, path: Path) -> None:
     axes[0].invert_yaxis()
     handles, labels = axes[1].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="outside lower center", ncol=2, frameon=False)
-    fig.suptitle("Burden on the common CBF filter (lower: the planner's commands need less correction)",
-                 fontsize=10)
+    title = "Burden on the common CBF filter (lower: the planner's commands need less correction)"
+    if not paper:
+        title += "\nthe paper's figures left out: not comparable (" + _verdict(summary, table)["why"][:90] + ")"
+    fig.suptitle(title, fontsize=10)
     _savefig(fig, path)
 
 

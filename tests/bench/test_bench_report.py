@@ -100,12 +100,60 @@ def test_write_reports(tmp_path):
                 "Planner P95 (ms)"):
         assert col in md
     assert "| BIG-CBF | 2 | 50.00 | 10.00 | 0.40 | 3.00 | 41.67 | 0.33 | 0 | 60.00 |" in md
-    assert "50.00 / 99.78" in md and "100.00 / 68.67" in md          # ours / paper's success
+    # two made-up scenes at two seeds: the paper's figures are not put beside them, and the page says why
+    assert "50.00 / 99.78" not in md and "Not comparable with the paper's Table II" in md
+    assert "9 of the paper's 9 scenes not in this bench" in md and "2 seeds per scene, the paper's 50" in md
     assert "## Success per scenario (%)" in md
     assert "a / big-cbf / seed 1: RuntimeError: boom" in md
     for fig in report.FIGURES:
         img = mpimg.imread(tmp_path / fig)
         assert img.shape[0] > 200 and img.shape[1] > 400
+
+
+def nine_at_fifty(edit: str | None = None, seeds: int = paper.PAPER_SEEDS, params: str | None = None):
+    """Rows of the nine shipped scenes at ``seeds`` seeds with their real content keys and the default parameter
+    hash (``edit``: that scene's rows carry another content key, as a user's copy of it with the same name)."""
+    keys = paper.shipped_scene_keys(paper.SCENARIO_ORDER)
+    phash = params or report.default_params_hash("paper")
+    rows = []
+    for sc in paper.SCENARIO_ORDER:
+        for seed in range(seeds):
+            r = row(sc, "big-cbf", seed, success=True, timeout=False, time_s=10.0)
+            r.update(scenario_sha="0123456789abcdef" if sc == edit else keys[sc], params_hash=phash)
+            rows.append(r)
+    return rows
+
+
+@pytest.mark.parametrize("case, why", [
+    ("shipped", None),
+    ("edited", "not the shipped file (by content): corridor_meeting"),
+    ("seeds", "10 seeds per scene, the paper's 50"),
+    ("config", "a run configuration other than the defaults"),
+    ("subset", "1 of the paper's 9 scenes not in this bench"),
+])
+def test_the_paper_is_shown_only_beside_its_own_benchmark(case, why):
+    """Table II and the quoted per-scene figures appear beside ours only for the shipped files (by content, not by
+    name), at 50 seeds, with the defaults; anything else is labelled not comparable, saying why."""
+    rows = nine_at_fifty(edit="corridor_meeting" if case == "edited" else None, seeds=10 if case == "seeds" else 50,
+                         params="ffffffffffffffff" if case == "config" else None)
+    scenes = list(paper.SCENARIO_ORDER)
+    if case == "subset":
+        scenes.remove("blind_corner")
+        rows = [r for r in rows if r["scenario"] != "blind_corner"]
+    seeds = sorted({r["seed"] for r in rows})
+    s = report.build_summary(rows, ["big-cbf"], scenes, seeds, {"suite": "paper", "perception": "lidar"})
+    verdict = s["paper"]["comparable"]["table_ii"]
+    md = report.summary_markdown(s)
+    if why is None:
+        assert verdict == {"comparable": True, "why": ""}
+        assert "| BIG-CBF | 100.00 / 99.78 |" in md and "100 / 98" in md      # Table II; corridor meeting's quote
+    else:
+        assert not verdict["comparable"] and why in verdict["why"]
+        assert "99.78" not in md and why in md
+        # the per-scene figures the paper quotes: beside each shipped scene run at 50 seeds with the defaults
+        quoted = s["paper"]["comparable"]["scenes"]
+        assert quoted == {"edited": ["multi_static_clutter", "required_sidestepping"], "seeds": [], "config": [],
+                          "subset": ["corridor_meeting", "multi_static_clutter", "required_sidestepping"]}[case]
 
 
 def test_update_docs_page(tmp_path):
@@ -203,8 +251,14 @@ def test_hardware_suite_report_is_beside_table_iii(tmp_path):
     assert suite.default_seeds == 20 and [e.scenario for e in suite.entries(tmp_path)] == list(
         paper.HARDWARE_SCENARIO_ORDER)
     rows = [row(s, "big-cbf", k, success=k < 2, time_s=12.0) for s in paper.HARDWARE_SCENARIO_ORDER for k in range(3)]
-    summary = report.build_summary(rows, ["big-cbf"], list(paper.HARDWARE_SCENARIO_ORDER), [0, 1, 2],
-                                   {"suite": "hardware"})
+    info = {"suite": "hardware", "perception": "lidar"}
+    md = report.summary_markdown(report.build_summary(rows, ["big-cbf"], list(paper.HARDWARE_SCENARIO_ORDER),
+                                                      [0, 1, 2], info))
+    assert "Not comparable with the paper's Table III" in md and "13.18" not in md   # made-up content keys
+    keys, phash = paper.shipped_scene_keys(paper.HARDWARE_SCENARIO_ORDER), report.default_params_hash("hardware")
+    for r in rows:      # the shipped lab scenes, by content, with the suite's defaults
+        r.update(scenario_sha=keys[r["scenario"]], params_hash=phash)
+    summary = report.build_summary(rows, ["big-cbf"], list(paper.HARDWARE_SCENARIO_ORDER), [0, 1, 2], info)
     md = report.summary_markdown(summary)
     assert "Table III" in md and "Table II\n" not in md
     assert "| BIG-CBF | 9 | 6/9 (66.7) / 15/15 (100.0) | 12.00 / 13.18 |" in md
