@@ -54,3 +54,38 @@ def path_arg(s: str) -> Path:
     if not s.strip():
         raise argparse.ArgumentTypeError("expected a path, got an empty string")
     return Path(s)
+
+
+def float_in_closed(lo: float, hi: float, what: str = "a number"):
+    """A finite number in (lo, hi]."""
+    def parse(s: str) -> float:
+        v = _float(s)
+        if not lo < v <= hi:
+            raise argparse.ArgumentTypeError(f"expected {what} in ({lo:g}, {hi:g}], got {v:g}")
+        return v
+    return parse
+
+
+def robot_profile_arg(s: str) -> Path:
+    """A robot profile (the simulated robot's imperfections, ``bigcbf/params/robot.py``): the name of a shipped one
+    (``x3_sim``, ``x3_hardware``: ``bigcbf/profiles/``) or a path to a .toml file. Returns the file; its contents
+    are checked where it is loaded (errors name that file and the field). One type for every subcommand that
+    takes ``--robot-profile``."""
+    from ..scenario import profile_files
+
+    shipped = profile_files()
+    if s in shipped:
+        return shipped[s]
+    names = ", ".join(shipped)
+    if not s.strip():
+        raise argparse.ArgumentTypeError(f"expected a shipped robot profile ({names}) or a .toml file, got an "
+                                         "empty string")
+    p = Path(s)
+    if p.suffix != ".toml":
+        raise argparse.ArgumentTypeError(f"no shipped robot profile {s[:60]!r} (shipped: {names}) and not a "
+                                         ".toml file")
+    if not p.is_file():
+        what = "is a folder" if p.is_dir() else "file not found"
+        raise argparse.ArgumentTypeError(f"{s[:200]}: {what} (a robot profile is a shipped name, {names}, or a "
+                                         ".toml file)")
+    return p

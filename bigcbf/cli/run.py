@@ -1,8 +1,10 @@
 """bigcbf run: one episode of a scenario with a method and a seed."""
 from __future__ import annotations
 
+from .argtypes import float_in_closed, nonneg_int, path_arg, robot_profile_arg
 
-from .argtypes import nonneg_int, path_arg
+#: the longest episode --time-limit allows [s] (a scenario file's own cap, bigcbf/scenario.py)
+MAX_TIME_LIMIT_S = 600.0
 
 HELP = "run one episode (scenario name or .toml file, method, seed); print its metrics, optionally a video/log"
 
@@ -15,10 +17,21 @@ def add_arguments(p):
     p.add_argument("--config", type=path_arg, default=None, metavar="RUN.toml",
                    help="run configuration: [stack], [perception], [pedestrians], [methods.NAME] tables "
                         "(docs/extending.md; default: every default)")
-    p.add_argument("--profile", type=path_arg, default=None,
-                   help="stack parameters / calibrated uncertainty profile TOML over the configuration's [stack] "
-                        "(default: Table I with the twin-calibrated profile of the simulated X3, "
-                        "bigcbf/profiles/stack/x3_sim.toml)")
+    p.add_argument("--profile", type=path_arg, default=None, metavar="STACK.toml",
+                   help="the STACK's uncertainty profile (tau95, execution model, residual bound), as 'bigcbf "
+                        "calibrate' or 'bigcbf profile simulate' writes it, laid over the configuration's [stack] "
+                        "(default: Table I with the profile of the simulated X3, bigcbf/profiles/stack/x3_sim.toml). "
+                        "It changes what the stack assumes, not how the simulated robot behaves: that is "
+                        "--robot-profile")
+    p.add_argument("--robot-profile", type=robot_profile_arg, default=None, metavar="NAME|FILE",
+                   help="the SIMULATED ROBOT's imperfections (latency, gain, bias, residual noise, wheel limits, "
+                        "sensors, faults): a shipped robot profile (x3_sim, x3_hardware) or a robot-profile .toml; "
+                        "replaces the robot profile the scenario builds on (its robot_profile_base, default x3_sim); "
+                        "the scenario's own [robot_profile] keys (a slippery floor, its faults) still apply on top")
+    p.add_argument("--time-limit", type=float_in_closed(0.0, MAX_TIME_LIMIT_S, "a time limit in seconds"),
+                   default=None, metavar="S",
+                   help=f"end the episode (a timeout) after S simulated seconds, 0 < S <= {MAX_TIME_LIMIT_S:g} "
+                        "(default: the scenario's time_limit_s)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
     p.add_argument("--video", type=path_arg, default=None, help="write an H.264 MP4 of the episode")
@@ -55,17 +68,34 @@ def start_live(port: int):
     return live
 
 
+def load_run_scenario(scenario, seed: int, robot_profile=None):
+    """The scenario (a name or a .toml path) drawn for ``seed``; with ``robot_profile`` (a robot-profile file, as
+    :func:`bigcbf.cli.argtypes.robot_profile_arg` returns it) in place of the base robot profile the scenario
+    names (``robot_profile_base``): the scenario's own ``[robot_profile]`` keys are laid over it as usual. A bad
+    profile is one UserError naming its file and the field."""
+    from dataclasses import replace
+
+    from ..scenario import load_scenario, robot_profile_table
+
+    if robot_profile is None:
+        return load_scenario(scenario, seed)
+    robot_profile_table(robot_profile)            # checked on its own, so that an error names this file
+    sc = load_scenario(scenario, seed, robot_profile_text=robot_profile.read_text())
+    return replace(sc, robot_profile_base=str(robot_profile))
+
+
 def run(args) -> int:
     from ..api import load_config, run_episode
     from ..outputs import strict_json
 
+    scenario = load_run_scenario(args.scenario, args.seed, args.robot_profile)
     config = load_config(args.config, args.profile, notes=stderr_note)
     live = None
     if args.live is not None:
         live = start_live(args.live)
     try:
-        res = run_episode(args.scenario, args.method, args.seed, config=config, perception=args.perception,
-                          video=args.video, camera=args.camera, log=args.log, live=live)
+        res = run_episode(scenario, args.method, args.seed, config=config, perception=args.perception,
+                          time_limit_s=args.time_limit, video=args.video, camera=args.camera, log=args.log, live=live)
     finally:
         if live is not None:
             live.close()
