@@ -27,9 +27,14 @@ Models compared, always the first two:
 
 Errors: velocity RMSE per axis over all samples; pose drift over consecutive windows of ``window_s``: the
 displacement over the window in the frame of its start, simulated minus logged (m), and the heading change
-difference (rad); the final position error. The result carries every note calibrate has about the log, and a
-warning for each identified axis on which the calibrated replay is worse than the nominal one, with what the
-calibration says about why.
+difference (rad); the final position error.
+
+The verdict (:func:`compare`) weighs every score the table prints -- the velocity RMSE of each identified axis, the
+mean and largest pose drift, the mean heading drift and the final error -- and says for each which model is better
+(lower is better; within 1 % of each other, or within half the printed resolution, they are "about equal"). The
+result carries that verdict as its first note, a ``WORSE:`` warning for each score on which the calibrated replay
+is worse than the nominal one (with what the calibration and the drift windows say about why), then every note
+calibrate has about the log.
 """
 from __future__ import annotations
 
@@ -73,6 +78,8 @@ class ReplayRun:
     yaw_drift_mean_rad: float = float("nan")
     yaw_drift_max_rad: float = float("nan")
     final_error_m: float = float("nan")
+    #: the pose-drift windows: (K, 3) rows of (start [s after the first command], drift [m], heading drift [rad])
+    windows: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def to_json(self) -> dict:
         p = self.profile
@@ -85,6 +92,122 @@ class ReplayRun:
                 "final_error_m": self.final_error_m}
 
 
+# --- the verdict --------------------------------------------------------------------------------------------
+#: The scores the replay's table prints (its column headers), their ReplayRun attribute, unit and printed
+#: resolution; the velocity RMSE columns come first, one per axis.
+POSE_SCORES = (("drift mean", "drift_mean_m", "m", 1e-3), ("drift max", "drift_max_m", "m", 1e-3),
+               ("yaw mean", "yaw_drift_mean_rad", "rad", 1e-3), ("final err", "final_error_m", "m", 1e-3))
+RMSE_UNITS = ("m/s", "m/s", "rad/s")
+RMSE_RESOLUTION = 1e-4
+TIE_REL = 0.01              # within 1 % of each other (or half the printed resolution) two scores are about equal
+
+
+@dataclass(frozen=True)
+class Score:
+    """One score of the replay's table for a model and for the nominal one (lower is better)."""
+    label: str              # the table's column header: "rmse vx", "drift max", ...
+    unit: str
+    model: float            # the compared model's (calibrated or fitted)
+    nominal: float
+    resolution: float       # the table's printed resolution
+    identified: bool = True  # False: an RMSE on an axis the log does not identify (not compared)
+
+    @property
+    def better(self) -> str:
+        """'model', 'nominal', 'equal', or 'not compared' (an axis not identified, or a score that is nan)."""
+        if not self.identified or not (np.isfinite(self.model) and np.isfinite(self.nominal)):
+            return "not compared"
+        if abs(self.model - self.nominal) <= max(TIE_REL * max(abs(self.model), abs(self.nominal)),
+                                                 self.resolution / 2):
+            return "equal"
+        return "model" if self.model < self.nominal else "nominal"
+
+    def to_json(self, name: str) -> dict:
+        b = self.better
+        return {"score": self.label, "unit": self.unit, name: self.model, "nominal": self.nominal,
+                "better": name if b == "model" else b}
+
+
+def scores(model: ReplayRun, nominal: ReplayRun, identified) -> list[Score]:
+    """Every score the table prints for ``model`` and the nominal run, in the table's order."""
+    ident = np.ones(3, bool) if identified is None else np.asarray(identified, bool)
+    out = [Score(f"rmse {AXES[j]}", RMSE_UNITS[j], float(model.rmse[j]), float(nominal.rmse[j]), RMSE_RESOLUTION,
+                 bool(ident[j])) for j in range(3)]
+    out += [Score(label, unit, float(getattr(model, attr)), float(getattr(nominal, attr)), res)
+            for label, attr, unit, res in POSE_SCORES]
+    return out
+
+
+def _fmt(x: float, res: float) -> str:
+    return f"{x:.4f}" if res < 1e-3 else f"{x:.3f}"
+
+
+def verdict_line(name: str, sc: list[Score]) -> str:
+    """One line: per score, which model is better, with both numbers (``name`` vs nominal)."""
+    parts = []
+    for s in sc:
+        if s.better == "not compared":
+            if not s.identified:
+                parts.append(f"{s.label} not compared ({s.label.split()[-1]} not identified)")
+            continue
+        nums = f"{name} {_fmt(s.model, s.resolution)}, nominal {_fmt(s.nominal, s.resolution)} {s.unit}"
+        parts.append(f"{s.label}: {'about equal' if s.better == 'equal' else s.better.replace('model', name) + ' better'}"
+                     f" ({nums})")
+    worse = [s.label for s in sc if s.better == "nominal"]
+    head = (f"verdict, {name} vs nominal (lower is better): "
+            + (f"{name} WORSE on {', '.join(worse)}; " if worse else f"{name} no worse on any score; "))
+    return head + "; ".join(parts)
+
+
+def why_pose_worse(label: str, model: ReplayRun, nominal: ReplayRun, window_s: float) -> str:
+    """What the drift windows say about why ``model`` is worse than the nominal run on a pose score (measured)."""
+    w, wn = model.windows, nominal.windows
+    out = []
+    if label == "final err":
+        out.append("the final error is one sample: the position error after the whole log, where every heading "
+                   "error on the way has turned into a displacement")
+    if len(w) and len(w) == len(wn):
+        col = 2 if label.startswith("yaw") else 1
+        more = int(np.sum(w[:, col] > wn[:, col]))
+        unit = "rad" if col == 2 else "m"
+        k = int(np.argmax(w[:, col]))
+        out.append(f"the {'heading ' if col == 2 else ''}drift is larger on {more} of {len(w)} {window_s:g}-s "
+                   f"windows; the largest is in the window {w[k, 0]:.1f}-{w[k, 0] + window_s:.1f} s after the first "
+                   f"command ({w[k, col]:.3f} {unit}, nominal {wn[k, col]:.3f} {unit})"
+                   + (f", where the replayed heading departs {w[k, 2]:.3f} rad from the log's (a heading error turns "
+                      "into position drift over the rest of the window)" if col == 1 else ""))
+    out.append("the pose scores integrate the velocity error where the RMSE weighs each sample alone: a brief "
+               "yaw-rate error the RMSE hardly sees (a wheel slip, a transient the model does not share) turns the "
+               "rest of the path")
+    return "; ".join(out)
+
+
+def compare(runs: dict[str, ReplayRun], identified, window_s: float, cal=None) -> list[str]:
+    """The verdict notes: for the calibrated run (and the fitted one), a line with every score, then a ``WORSE:``
+    warning per score on which it is worse than the nominal run, with what is known about why."""
+    notes = []
+    nominal = runs["nominal"]
+    for name in ("calibrated", "fitted"):
+        if name not in runs:
+            continue
+        run = runs[name]
+        sc = scores(run, nominal, identified)
+        notes.append(verdict_line(name, sc))
+        for s in sc:
+            if s.better != "nominal":
+                continue
+            nums = f"({name} {_fmt(s.model, s.resolution)}, nominal {_fmt(s.nominal, s.resolution)} {s.unit})"
+            if s.label.startswith("rmse"):
+                j = AXES.index(s.label.split()[-1])
+                why = why_worse(j, cal, nominal, run) if name == "calibrated" else "fitted on the first part only"
+                notes.append(f"WORSE: the {name} replay tracks {AXES[j]} worse than the nominal one {nums}"
+                             + (f": {why}" if why else ""))
+            else:
+                notes.append(f"WORSE: the {name} replay's {s.label} is larger than the nominal one's {nums}: "
+                             + why_pose_worse(s.label, run, nominal, window_s))
+    return notes
+
+
 @dataclass
 class ReplayResult:
     log: str
@@ -94,20 +217,33 @@ class ReplayResult:
     identified: np.ndarray | None = None      # the axes the calibration identified (the comparison's axes)
 
     @property
-    def worse_axes(self) -> list[str]:
-        """Identified axes on which the calibrated replay is worse than the nominal one."""
-        if "calibrated" not in self.runs or self.identified is None:
+    def scores(self) -> list[Score]:
+        """Every score of the table, calibrated vs nominal ([] without a calibrated run)."""
+        if "calibrated" not in self.runs:
             return []
-        c, n = self.runs["calibrated"].rmse, self.runs["nominal"].rmse
-        return [AXES[j] for j in np.flatnonzero(self.identified) if c[j] > n[j]]
+        return scores(self.runs["calibrated"], self.runs["nominal"], self.identified)
+
+    @property
+    def worse_on(self) -> list[str]:
+        """The scores (table headers: "rmse vx", "drift max", ...) on which the calibrated replay is worse than
+        the nominal one: the velocity RMSE of the identified axes and every pose score."""
+        return [s.label for s in self.scores if s.better == "nominal"]
+
+    @property
+    def worse_axes(self) -> list[str]:
+        """What ``bigcbf replay`` lists after "calibrated worse than nominal on": every score of :attr:`worse_on`
+        (an identified axis's velocity RMSE and the pose scores alike)."""
+        return self.worse_on
 
     def to_json(self) -> dict:
         from .calibrate import jsonable
+        verdict = {name: [s.to_json(name) for s in scores(r, self.runs["nominal"], self.identified)]
+                   for name, r in self.runs.items() if name != "nominal"}
         return jsonable({"log": self.log, "window_s": self.window_s,
                          "runs": {k: r.to_json() for k, r in self.runs.items()},
                          "identified": None if self.identified is None else
                          {a: bool(x) for a, x in zip(AXES, self.identified)},
-                         "calibrated_worse_on": self.worse_axes, "notes": self.notes})
+                         "verdict": verdict, "calibrated_worse_on": self.worse_on, "notes": self.notes})
 
 
 # --- simulation ----------------------------------------------------------------------------------------------
@@ -190,7 +326,7 @@ def errors(run: ReplayRun, odom: OdomSeries, window_s: float) -> ReplayRun:
     k = np.searchsorted(odom.t, run.t)
     log_pose, log_twist = odom.pose[k], odom.twist[k]
     run.rmse = np.sqrt(np.mean((run.twist[1:] - log_twist[1:]) ** 2, axis=0))
-    drifts, yaws = [], []
+    drifts, yaws, starts = [], [], []
     a = 0
     while True:
         b = int(np.searchsorted(run.t, run.t[a] + window_s))
@@ -203,10 +339,12 @@ def errors(run: ReplayRun, odom: OdomSeries, window_s: float) -> ReplayRun:
             d.append((np.array([c * dp[0] + s * dp[1], -s * dp[0] + c * dp[1]]), _wrap(P[b, 2] - P[a, 2])))
         drifts.append(float(np.linalg.norm(d[1][0] - d[0][0])))
         yaws.append(float(abs(_wrap(d[1][1] - d[0][1]))))
+        starts.append(float(run.t[a] - run.t[0]))
         a = b
     if drifts:
         run.drift_mean_m, run.drift_max_m = float(np.mean(drifts)), float(np.max(drifts))
         run.yaw_drift_mean_rad, run.yaw_drift_max_rad = float(np.mean(yaws)), float(np.max(yaws))
+        run.windows = np.column_stack([starts, drifts, yaws])
     run.final_error_m = float(np.linalg.norm(run.pose[-1, :2] - log_pose[-1, :2]))
     return run
 
@@ -366,11 +504,7 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
         runs["fitted"] = fit_profile(data, prof, opt, scene, P)
     identified = cal.fit.identified if cal is not None else np.array(
         execution.identified if execution is not None else (True, True, True))
-    for j in np.flatnonzero(identified):
-        c, n = runs["calibrated"].rmse[j], nominal.rmse[j]
-        if c > n:
-            notes.append(f"WORSE: the calibrated replay tracks {AXES[j]} worse than the nominal one ({c:.4f} vs "
-                         f"{n:.4f} {('m/s', 'm/s', 'rad/s')[j]}): {why_worse(j, cal, nominal, runs['calibrated'])}")
+    notes = compare(runs, identified, opt.window_s, cal) + notes      # the verdict first: what a person reads
     if video is not None:
         best = runs.get("fitted", runs["calibrated"])
         write_video(data, best, runs["nominal"], video, opt, scene)
