@@ -123,11 +123,18 @@ def imu_msg(t: float, imu: dict, frame_id: str = "imu_link", cov: dict | None = 
             "linear_acceleration_covariance": [float(v) for v in cov.get("linear_acceleration", [0.0] * 9)]}
 
 
-def tf_msg(t: float, s: RobotState, parent: str = "odom", child: str = "base_link") -> dict:
-    """The planar transform parent -> child at pose s, as tf2_msgs/TFMessage."""
+def tf_msg(t: float, s: RobotState, parent: str = "odom", child: str = "base_link", extra=()) -> dict:
+    """The planar transform parent -> child at pose s, as tf2_msgs/TFMessage; ``extra``: more transforms of the
+    same instant, [(parent, child, (x, y, z), quaternion (x, y, z, w)), ...] (the wheels' joints)."""
     return {"transforms": [{"header": _header(t, parent), "child_frame_id": child,
                             "transform": {"translation": _vec3((s.px, s.py, 0.0)),
-                                          "rotation": yaw_quaternion(s.theta)}}]}
+                                          "rotation": yaw_quaternion(s.theta)}}]
+            + [_transform(t, p, c, xyz, q) for p, c, xyz, q in extra]}
+
+
+def _transform(t: float, parent: str, child: str, xyz, quat_xyzw) -> dict:
+    return {"header": _header(t, parent), "child_frame_id": child,
+            "transform": {"translation": _vec3(xyz), "rotation": dict(zip("xyzw", map(float, quat_xyzw)))}}
 
 
 def string_msg(text: str) -> dict:

@@ -1,26 +1,39 @@
 """Record an episode as ROS 2 MCAP (``bigcbf run --log PATH.mcap``): an observer of the episode's control steps,
 laid out as a Nav2 user expects it in Foxglove.
 
-At the start (log time 0): /tf_static (base_link -> laser and imu_link, from the model's sites), /robot_description
-(the robot's MJCF text), both latched, and /goal_pose. At every control step (T_C): /clock, /tf (odom ->
-base_link), /odom (the stack's state), /cmd_vel (u_safe), /cmd_vel_in (u_in), /ground_truth/odom, /imu and
-/behavior; /plan (the selected behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the
+At the start (log time 0), latched: /tf_static (map -> odom, the identity: the simulator's world is where odom
+starts; base_link -> laser and imu_link, from the model's sites), /robot_description (the robot's URDF, derived
+from its MJCF: :mod:`bigcbf.logio.urdf`), /goal_pose, /map (the scene's walls, boxes and cylinders as an occupancy
+grid) and /scene/markers (the same as markers). At every control step (T_C): /clock, /tf (odom -> base_link and
+the wheels' joint angles), /odom (the stack's state), /cmd_vel (u_safe), /cmd_vel_in (u_in), /ground_truth/odom,
+/imu, /behavior and, in a scene with pedestrians, /pedestrians/markers (where they truly are); /plan (the selected behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the
 six imagined paths of the selection) whenever they change. At every new LiDAR scan: /scan, /tracked_obstacles
 (markers), /obstacles (the estimates with their covariances) and /cbf/inflated_radius (the D_i rings of
 Eq. (14) the filter used at that step). /odom and /imu carry the covariances of the robot profile's sensor
 models (:mod:`bigcbf.logio.covariance`); /odom's are zero when the stack runs on the ground truth
 (``--perception truth``), as is /ground_truth/odom's.
 
-Frames (REP 105): odom (the world frame at the start) -> base_link (the robot on the floor) -> laser, imu_link.
+Frames (REP 105): map (the simulator's world) -> odom (the world frame at the start, identical) -> base_link (the
+robot on the floor) -> laser, imu_link and the four wheel links of the URDF.
 Time base: simulation time (see :mod:`bigcbf.logio.writer`). The episode is duck-typed (``observers`` list,
-``world``, ``goal``, ``planner``), so this module does not import the episode layer above it.
+``world`` with ``model``, ``data``, ``scene``, ``goal``, ``planner``, ``walkers``), so this module does not import
+the episode layer above it.
+
+Interrupted (Ctrl-C, SIGTERM through :func:`bigcbf.logio.interrupts.interrupts_as_keyboard_interrupt`): ``abort()``
+called while a KeyboardInterrupt is handled keeps the log recorded so far as ``X.partial.mcap``
+(:meth:`finish_partial`) and appends its path to the exception's ``partial_logs`` list, so that the command line
+can say where it is; any other abort drops it.
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
+import numpy as np
+
 from .covariance import WorldCovariances
-from .writer import LogWriter
+from .interrupts import critical
+from .writer import MAP_FRAME, LogWriter
 
 
 class EpisodeLogger:
@@ -45,21 +58,42 @@ class EpisodeLogger:
         self._last_path = None
         self._last_imagination = None
         w = self.writer
+        self.urdf = None
         frames = getattr(self.world, "sensor_frames", None)
+        static = [(MAP_FRAME, w.odom_frame, (0.0, 0.0, 0.0), 0.0)]
         if frames is not None:
-            w.tf_static(0.0, [(w.base_frame, child, (x, y, z), yaw) for child, (x, y, z, yaw) in frames().items()])
-        describe = getattr(self.world, "robot_description", None)
-        if describe is not None:
-            w.robot_description(0.0, describe())
+            sensors = frames()
+            static += [(w.base_frame, child, (x, y, z), yaw) for child, (x, y, z, yaw) in sensors.items()]
+            if hasattr(self.world, "model"):
+                from .urdf import robot_description
+                self.urdf = robot_description(self.world.model, sensors, base=w.base_frame)
+        w.tf_static(0.0, static)
+        if self.urdf is not None:
+            w.robot_description(0.0, self.urdf.text)
         goal = getattr(episode, "goal", None)
         if goal is not None:
             w.goal_pose(0.0, goal)
+        scene = getattr(self.world, "scene", None)
+        if scene is not None:
+            w.occupancy_grid(0.0, scene)
+            w.scene_markers(0.0, scene)
+        # the true pedestrians: their mocap bodies (positions) and the scene's bodies (names, radii, heights)
+        self._walkers = getattr(episode, "walkers", None)
+        peds = tuple(getattr(scene, "pedestrians", ())) if self._walkers is not None else ()
+        self._peds = ([p.name for p in peds], [p.radius for p in peds], [p.height for p in peds]) if peds else None
         episode.observers.append(self)
 
     def __call__(self, rec) -> None:
+        with critical:                   # an interrupt waits for the step's messages (the partial log ends whole)
+            self._step(rec)
+
+    def _step(self, rec) -> None:
         w, t = self.writer, rec.t
         w.clock(t)
-        w.tf(t, rec.state)
+        w.tf(t, rec.state, extra=() if self.urdf is None else self.urdf.wheel_transforms(self.world.data.qpos))
+        if self._peds is not None:
+            names, radii, heights = self._peds
+            w.pedestrians(t, names, np.asarray(self._walkers.positions(), float), radii, heights)
         w.cmd_vel(t, rec.u_safe)
         w.cmd_vel_in(t, rec.u_in)
         if self._cov is not None and not self._odom_exact:
@@ -91,5 +125,23 @@ class EpisodeLogger:
     def close(self) -> None:
         self.writer.close()
 
+    def finish_partial(self) -> Path | None:
+        """Keep the log recorded so far as ``X.partial.mcap`` (:meth:`bigcbf.logio.writer.LogWriter.finish_partial`);
+        its path, or None for a writer that keeps nothing (a live stream: closed)."""
+        finish = getattr(self.writer, "finish_partial", None)
+        if finish is None:
+            self.writer.close()
+            return None
+        return finish()
+
     def abort(self) -> None:
+        """Drop the unfinished log, or, while a KeyboardInterrupt is handled, keep it (module docstring)."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, KeyboardInterrupt):
+            path = self.finish_partial()
+            if path is not None:
+                if not isinstance(getattr(exc, "partial_logs", None), list):
+                    exc.partial_logs = []
+                exc.partial_logs.append(path)
+            return
         self.writer.abort()

@@ -20,6 +20,7 @@ MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 PATH = "nav_msgs/msg/Path"
 CLOCK = "rosgraph_msgs/msg/Clock"
+OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 TRACKED_OBSTACLE = "bigcbf_msgs/msg/TrackedObstacle"
 TRACKED_OBSTACLE_ARRAY = "bigcbf_msgs/msg/TrackedObstacleArray"
 

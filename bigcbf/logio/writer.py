@@ -11,16 +11,20 @@ show the epoch (1970-01-01) plus that time: choose "seconds" as the time format 
 Topics and the method that writes each::
 
     /clock                       rosgraph_msgs/Clock              clock()
-    /tf_static                   tf2_msgs/TFMessage               tf_static()      base_link -> laser, imu_link (1)
-    /robot_description           std_msgs/String                  robot_description()   the model's text (1)
-    /tf                          tf2_msgs/TFMessage               tf()             odom -> base_link
+    /tf_static                   tf2_msgs/TFMessage               tf_static()      map -> odom, base_link -> laser,
+                                                                                   imu_link (1)
+    /robot_description           std_msgs/String                  robot_description()   the robot's URDF (1)
+    /tf                          tf2_msgs/TFMessage               tf()             odom -> base_link, the wheels
+    /map                         nav_msgs/OccupancyGrid           occupancy_grid() the scene's static geometry (1)
+    /scene/markers               visualization_msgs/MarkerArray   scene_markers()  walls, boxes, cylinders (1)
+    /pedestrians/markers         visualization_msgs/MarkerArray   pedestrians()    the true pedestrians
     /scan                        sensor_msgs/LaserScan            scan()           frame laser
     /odom                        nav_msgs/Odometry                odom()           wheel odometry, pose in odom (2)
     /imu                         sensor_msgs/Imu                  imu()            frame imu_link (2)
     /cmd_vel                     geometry_msgs/Twist              cmd_vel()        u_safe, what the robot is sent
     /cmd_vel_in                  geometry_msgs/Twist              cmd_vel_in()     u_in, before the CBF filter
     /ground_truth/odom           nav_msgs/Odometry                ground_truth()
-    /goal_pose                   geometry_msgs/PoseStamped        goal_pose()      as Nav2's
+    /goal_pose                   geometry_msgs/PoseStamped        goal_pose()      as Nav2's (1)
     /plan                        nav_msgs/Path                    plan()           the selected behavior's path
     /plan/candidates             visualization_msgs/MarkerArray   candidates()     BIG-CBF's imagined paths
     /behavior                    std_msgs/String                  behavior()       the selected behavior mode
@@ -30,16 +34,22 @@ Topics and the method that writes each::
 
 (1) written once at the start with the QoS of a latched topic (durability transient local, as rosbag2 records
 it in the channel's ``offered_qos_profiles``), so a player gives them to late subscribers.
+(The scene's topics, in frame ``map``: :mod:`bigcbf.logio.scene_msgs`; the URDF: :mod:`bigcbf.logio.urdf`.)
+
+A log that is interrupted (Ctrl-C, SIGTERM: :mod:`bigcbf.logio.interrupts`) can be kept: ``finish_partial()``
+completes it (summary and footer) as ``X.partial.mcap`` beside ``X.mcap``, never in the final file's place.
 (2) covariances from the robot profile's sensor models when the caller gives them (the episode logger and the
 calibration recorder do: :mod:`bigcbf.logio.covariance`), else zero.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from ..errors import UserError
 from ..types import LaserScan, Obstacles, RobotState
-from . import convert, msgdefs
+from . import convert, msgdefs, scene_msgs
+from .interrupts import critical
 
 TOPIC_SCAN = "/scan"
 TOPIC_ODOM = "/odom"
@@ -58,6 +68,9 @@ TOPIC_GOAL = "/goal_pose"
 TOPIC_PLAN = "/plan"
 TOPIC_CANDIDATES = "/plan/candidates"
 TOPIC_INFLATED = "/cbf/inflated_radius"
+TOPIC_MAP = "/map"
+TOPIC_SCENE = "/scene/markers"
+TOPIC_PEDESTRIANS = "/pedestrians/markers"
 
 #: every topic an episode log has, and its type (bigcbf.logio.episode_log writes them)
 EPISODE_TOPICS = {
@@ -67,7 +80,21 @@ EPISODE_TOPICS = {
     TOPIC_BEHAVIOR: msgdefs.STRING, TOPIC_PLAN: msgdefs.PATH, TOPIC_CANDIDATES: msgdefs.MARKER_ARRAY,
     TOPIC_SCAN: msgdefs.LASER_SCAN, TOPIC_OBSTACLES: msgdefs.MARKER_ARRAY,
     TOPIC_OBSTACLE_STATES: msgdefs.TRACKED_OBSTACLE_ARRAY, TOPIC_INFLATED: msgdefs.MARKER_ARRAY,
+    TOPIC_MAP: msgdefs.OCCUPANCY_GRID, TOPIC_SCENE: msgdefs.MARKER_ARRAY, TOPIC_PEDESTRIANS: msgdefs.MARKER_ARRAY,
 }
+
+#: the map frame of the scene's topics (the simulator's world; /tf_static: map -> odom, identity)
+MAP_FRAME = "map"
+
+#: suffix of an interrupted log kept by finish_partial (X.mcap -> X.partial.mcap)
+PARTIAL_SUFFIX = ".partial"
+
+
+def partial_path(path: str | Path) -> Path:
+    """Where an interrupted log of ``path`` is kept: X.mcap -> X.partial.mcap (X.log -> X.log.partial.mcap)."""
+    p = Path(path)
+    stem = p.stem if p.suffix == ".mcap" else p.name
+    return p.with_name(f"{stem}{PARTIAL_SUFFIX}.mcap")
 
 #: rosbag2's record of a latched publisher's QoS (reliable, transient local, keep last 1)
 LATCHED_QOS = """- history: 1
@@ -129,8 +156,9 @@ class LogWriter:
                 metadata={"offered_qos_profiles": LATCHED_QOS})
         ns = convert.to_ns(t)
         try:
-            self._w.write_message(topic, schema, message, log_time=ns, publish_time=ns,
-                                  sequence=self.counts.get(topic, 0))
+            with critical:              # an interrupt waits for the message to be written whole
+                self._w.write_message(topic, schema, message, log_time=ns, publish_time=ns,
+                                      sequence=self.counts.get(topic, 0))
         except OSError as exc:       # a full disk, say: drop the unfinished log, say so in one line
             self.abort()
             raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
@@ -162,8 +190,10 @@ class LogWriter:
         """The planner's input command u_in, before the CBF filter."""
         self.write(topic, msgdefs.TWIST, t, convert.twist_msg(u))
 
-    def tf(self, t: float, state: RobotState, topic: str = TOPIC_TF) -> None:
-        self.write(topic, msgdefs.TF_MESSAGE, t, convert.tf_msg(t, state, self.odom_frame, self.base_frame))
+    def tf(self, t: float, state: RobotState, topic: str = TOPIC_TF, *, extra=()) -> None:
+        """odom -> base_link at ``state``, and ``extra`` transforms [(parent, child, xyz, quaternion (x, y, z, w))]
+        of the same instant (the wheels' joints, :meth:`bigcbf.logio.urdf.RobotDescription.wheel_transforms`)."""
+        self.write(topic, msgdefs.TF_MESSAGE, t, convert.tf_msg(t, state, self.odom_frame, self.base_frame, extra))
 
     def behavior(self, t: float, mode: str, topic: str = TOPIC_BEHAVIOR) -> None:
         self.write(topic, msgdefs.STRING, t, convert.string_msg(mode))
@@ -187,12 +217,28 @@ class LogWriter:
         self.write(topic, msgdefs.TF_MESSAGE, t, convert.static_tf_msg(t, transforms), latched=True)
 
     def robot_description(self, t: float, text: str, topic: str = TOPIC_ROBOT_DESCRIPTION) -> None:
-        """The robot model's text (std_msgs/String), latched."""
+        """The robot model's URDF (std_msgs/String), latched, as robot_state_publisher publishes it."""
         self.write(topic, msgdefs.STRING, t, convert.string_msg(text), latched=True)
 
     def goal_pose(self, t: float, goal_xy, topic: str = TOPIC_GOAL) -> None:
+        """The goal, latched (a viewer that connects late still shows it)."""
         self.write(topic, msgdefs.POSE_STAMPED, t,
-                   convert.pose_stamped_msg(t, float(goal_xy[0]), float(goal_xy[1]), 0.0, self.odom_frame))
+                   convert.pose_stamped_msg(t, float(goal_xy[0]), float(goal_xy[1]), 0.0, self.odom_frame),
+                   latched=True)
+
+    def occupancy_grid(self, t: float, scene, topic: str = TOPIC_MAP, resolution: float | None = None) -> None:
+        """The scene's static geometry as nav_msgs/OccupancyGrid in ``map``, latched (bigcbf.logio.scene_msgs)."""
+        self.write(topic, msgdefs.OCCUPANCY_GRID, t, scene_msgs.occupancy_grid_msg(t, scene, MAP_FRAME, resolution),
+                   latched=True)
+
+    def scene_markers(self, t: float, scene, topic: str = TOPIC_SCENE) -> None:
+        """Walls, boxes and cylinders as markers in ``map``, latched."""
+        self.write(topic, msgdefs.MARKER_ARRAY, t, scene_msgs.scene_markers_msg(t, scene, MAP_FRAME), latched=True)
+
+    def pedestrians(self, t: float, names, positions, radii, heights, topic: str = TOPIC_PEDESTRIANS) -> None:
+        """The true pedestrians as markers in ``map``."""
+        self.write(topic, msgdefs.MARKER_ARRAY, t,
+                   scene_msgs.pedestrian_markers_msg(t, names, positions, radii, heights, MAP_FRAME))
 
     def plan(self, t: float, points_xy, topic: str = TOPIC_PLAN) -> None:
         self.write(topic, msgdefs.PATH, t, convert.path_msg(t, points_xy, self.odom_frame))
@@ -216,6 +262,27 @@ class LogWriter:
                 self._file.discard()
                 raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
             self._file.commit()
+
+    def finish_partial(self) -> Path | None:
+        """Complete an interrupted log (its last chunk, summary and footer: a valid MCAP) and keep it as
+        ``X.partial.mcap`` beside ``X.mcap`` (:func:`partial_path`; an older one there is replaced); the final path
+        is left as it was and no temporary file remains. Returns the partial log's path (None if the log was
+        already closed or dropped). A signal during this waits until it is done (:mod:`bigcbf.logio.interrupts`)."""
+        if self._fh is None:
+            return None
+        with critical:
+            target = partial_path(self._file.target)
+            try:
+                try:
+                    self._w.finish()
+                finally:
+                    self._fh.close()
+                    self._fh = None
+                os.replace(self._file.tmp, target)
+            except OSError as exc:
+                self._file.discard()
+                raise UserError(f"cannot write the partial log: {exc.strerror}", file=str(target)) from None
+        return target
 
     def abort(self) -> None:
         """Drop the unfinished log (its path is left as it was)."""

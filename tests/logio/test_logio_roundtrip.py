@@ -168,6 +168,7 @@ def test_episode_logger_records_every_topic(tmp_path):
     with open_log(path) as log:
         counts = {k: v.count for k, v in log.topics.items()}
         assert counts == {"/clock": 4, "/cmd_vel": 4, "/cmd_vel_in": 4, "/odom": 4, "/tf": 4, "/ground_truth/odom": 4,
-                          "/imu": 4, "/behavior": 4, "/scan": 2, "/tracked_obstacles": 2, "/obstacles": 2}
+                          "/imu": 4, "/behavior": 4, "/scan": 2, "/tracked_obstacles": 2, "/obstacles": 2,
+                          "/tf_static": 1}                 # map -> odom, with no sensor frames
         cmds = [m for _, _, m in log.messages(["/cmd_vel", "/cmd_vel_in"])]
     assert [c.linear.x for c in cmds[:2]] == [0.8, 1.0]
