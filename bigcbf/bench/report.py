@@ -4,7 +4,9 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``success_pct``: 100 x successful episodes / episodes.
 - ``time_s``: mean completion time of the *successful* episodes (the time to reach the goal; a timeout's time is
   the time limit and says nothing about speed). ``None`` when no episode succeeded.
-- ``min_clearance_m``: mean over episodes of the episode's minimum true clearance (surface distance - r_R).
+- ``min_clearance_m``: mean over episodes of the episode's minimum true clearance: the signed distance between the
+  robot's collision outline (a 0.30 x 0.20 m rectangle at the true pose, ``bigcbf/sim/truth.py``) and the nearest
+  obstacle's surface, negative for a penetration (not the paper's disc of radius r_R).
 - ``e_cbf``: mean over episodes of E_CBF, Eq. (20) (a per-episode sum, as in the paper).
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
   over all control steps of all episodes of the group (the paper's "fraction of control steps").
