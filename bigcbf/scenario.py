@@ -41,6 +41,7 @@ goal. Errors name the field and the obstacle (e.g. ``robot.start`` overlaps ``wa
 from __future__ import annotations
 
 import math
+import re
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -65,6 +66,18 @@ MAX_WAYPOINTS = 1000             # per pedestrian
 GOAL_REGION_M = 0.15             # radius of the goal region the geometry check uses (Table I's eps_g)
 
 XY = tuple[float, float]
+
+#: a scenario's or a pedestrian's name: a letter, digit or underscore, then those, '.' or '-' (at most 100): never a
+#: path separator, a space or a control character (names reach file names, MJCF bodies and XML)
+NAME_RE = re.compile(r"\w[\w.-]{0,99}")
+
+
+def check_name(name, what: str) -> None:
+    """A FieldError ("name") unless ``name`` is a plain identifier-like string (:data:`NAME_RE`)."""
+    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
+        shown = repr(name)[:60]
+        raise FieldError("name", f"{what} name must be letters, digits, '_', '.' or '-' (starting with a letter, "
+                                 f"digit or '_', at most 100; no '/', spaces or control characters), got {shown}")
 
 
 def _in_world(name: str, *points) -> None:
@@ -150,6 +163,7 @@ class PedestrianSpec:
     turn: PedestrianTurn = PedestrianTurn()  # sudden turns / reversals; none by default
 
     def __post_init__(self):
+        check_name(self.name, "a pedestrian's")
         if not 2 <= len(self.waypoints) <= MAX_WAYPOINTS:
             raise FieldError("waypoints", f"a pedestrian needs at least 2 waypoints (at most {MAX_WAYPOINTS})")
         _in_world("waypoints", *self.waypoints)
@@ -194,6 +208,7 @@ class Scenario:
     robot_profile_base: str = field(default="", compare=False)   # the base profile's file (set by the loader)
 
     def __post_init__(self):
+        check_name(self.name, "a scenario's")
         if not 0 < self.time_limit_s <= MAX_TIME_LIMIT_S:
             raise FieldError("time_limit_s", f"must be in (0, {MAX_TIME_LIMIT_S:g}] s, got {self.time_limit_s:g}")
         if not 0 < self.extent_m <= WORLD_LIMIT_M:
@@ -345,6 +360,11 @@ def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_te
     name = raw.get("name", path.stem)
     if not isinstance(name, str):
         raise UserError("expected a string", file=str(path), field="name")
+    try:
+        check_name(name, "a scenario's")
+    except FieldError as exc:
+        hint = "" if "name" in raw else " (the file sets no name, so its file name is used: set name = \"...\")"
+        raise UserError(f"{exc}{hint}", file=str(path), field="name") from None
     draws_as = raw.pop("draws_as", name)
     if not isinstance(draws_as, str) or not draws_as:
         raise UserError("expected a scenario name (a non-empty string)", file=str(path), field="draws_as")

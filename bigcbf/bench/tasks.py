@@ -21,7 +21,6 @@ import hashlib
 import json
 import os
 import socket
-import tempfile
 import time
 import traceback
 from dataclasses import dataclass
@@ -98,14 +97,17 @@ def _config(task: EpisodeTask):
 
 
 def _scenario(task: EpisodeTask):
-    """The task's scenario drawn for its seed: load_scenario reads files, so the text goes through a temporary
-    file named after the scenario (deleted at once; nothing of the episode refers to it afterwards)."""
-    from ..scenario import load_scenario
+    """The task's scenario drawn for its seed, parsed from the text the task carries. No file is written: a path
+    made from a file's content (the scenario's name) could point anywhere (``name = "../../x"``). A file without
+    ``name`` is named after its file, which the worker does not have: the task's name (the one the bench planned
+    with) stands in for it."""
+    from ..params.toml_io import parse_toml
+    from ..scenario import scenario_from_dict
 
-    with tempfile.TemporaryDirectory(prefix="bigcbf-bench-") as d:
-        path = Path(d) / f"{task.scenario}.toml"
-        path.write_text(task.scenario_toml)
-        return load_scenario(path, task.seed, robot_profile_text=task.robot_profile_toml)
+    label = f"<bench scenario {task.scenario_sha}>"     # names the text in error messages; never opened
+    raw = parse_toml(task.scenario_toml, label)
+    raw.setdefault("name", task.scenario)
+    return scenario_from_dict(raw, Path(label), task.seed, robot_profile_text=task.robot_profile_toml)
 
 
 def _json_safe(metrics: dict) -> dict:
