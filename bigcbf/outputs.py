@@ -10,6 +10,10 @@ Every output of the command line (videos, logs, profiles, reports, the bench's f
   from it -- ffmpeg, matplotlib -- still do); when the block ends without an exception it is renamed over ``path``
   (``os.replace``, atomic on POSIX), otherwise it is deleted. A failed or interrupted write never leaves a
   half-written file and never destroys the previous one: nothing the user made is lost.
+- ``check_distinct(inputs, outputs)`` runs before the work too: no output is one of the command's inputs, lies
+  inside an input folder (a ROS 2 bag) or is another output of the same command -- the same file after symbolic
+  links are followed, or a hard link to it (same device and inode) -- so ``run sc.toml --log sc.toml`` or
+  ``--video X --log X`` is one ``UserError`` line instead of a destroyed scenario or a lost video.
 - ``strict_json`` prints JSON that strict parsers accept: NaN and +-Infinity (numpy's too) become ``null``.
 """
 from __future__ import annotations
@@ -18,9 +22,10 @@ import contextlib
 import json
 import math
 import os
+import stat
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Mapping
 
 from .errors import UserError
 
@@ -92,6 +97,55 @@ def check_output_dir(path: str | Path, what: str) -> Path:
         raise UserError(f"cannot create the {what} ({_why(exc)})", file=str(path)) from None
     _probe(p, p, what)
     return p
+
+
+class _Where:
+    """A path as the file system sees it: its real path (symbolic links followed) and, when it exists, its
+    (device, inode) pair (two hard links of one file share it) and whether it is a folder."""
+
+    def __init__(self, path: str | Path):
+        self.real = os.path.realpath(path)
+        try:
+            st = os.stat(self.real)
+        except OSError:
+            self.inode, self.is_dir = None, False
+        else:
+            self.inode, self.is_dir = (st.st_dev, st.st_ino), stat.S_ISDIR(st.st_mode)
+
+    def same(self, other: "_Where") -> bool:
+        return self.real == other.real or (self.inode is not None and self.inode == other.inode)
+
+    def inside(self, folder: "_Where") -> bool:
+        """This path lies somewhere below ``folder`` (an existing folder)."""
+        return folder.is_dir and os.path.commonpath([self.real, folder.real]) == folder.real != self.real
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """``a`` and ``b`` name one file: the same real path, or (both existing) the same device and inode."""
+    return _Where(a).same(_Where(b))
+
+
+def check_distinct(inputs: Mapping[str, str | Path | None], outputs: Mapping[str, str | Path | None]) -> None:
+    """Refuse, before any work, outputs that would destroy an input or each other: every output (label -> path;
+    None entries are skipped) must differ from every input and every other output -- compared by real path and,
+    where the file exists, by (device, inode), so symbolic and hard links are seen through -- and must not lie
+    inside an input that is a folder (a ROS 2 bag folder, say). The labels name the options in the one-line
+    ``UserError`` (e.g. ``{"scenario": "sc.toml"}``, ``{"--log": "sc.toml"}``). An output folder is given as the
+    files the command writes in it (``{"--report calibration.json": DIR / "calibration.json", ...}``)."""
+    ins = [(label, p, _Where(p)) for label, p in inputs.items() if p is not None]
+    outs = [(label, p, _Where(p)) for label, p in outputs.items() if p is not None]
+    for k, (label, path, where) in enumerate(outs):
+        for in_label, in_path, in_where in ins:
+            if where.same(in_where):
+                raise UserError(f"{label} is the same file as the {in_label} ({in_path}); writing it would destroy "
+                                f"the {in_label}: give {label} another path", file=str(path))
+            if where.inside(in_where):
+                raise UserError(f"{label} lies inside the {in_label} folder ({in_path}); writing it would change "
+                                f"the {in_label}: give {label} a path outside it", file=str(path))
+        for other_label, other_path, other_where in outs[:k]:
+            if where.same(other_where):
+                raise UserError(f"{label} and {other_label} are the same file ({other_path}); one would replace "
+                                f"the other: give each output its own path", file=str(path))
 
 
 class AtomicFile:

@@ -160,6 +160,68 @@ class _DirLock:
         self.fh.close()
 
 
+#: what a bench leaves in --out before its database holds anything (a bench stopped at its start): not the user's
+_START_REMNANTS = frozenset({".bench.lock", DB_NAME, DB_NAME + "-wal", DB_NAME + "-shm", DB_NAME + "-journal"})
+
+
+def is_results_db(path: Path) -> bool:
+    """``path`` is a bigcbf results database (an SQLite file with the store's ``meta`` table), read without changing
+    it. A database that cannot be opened for another reason (a read-only folder, a lock) counts as one: the store
+    opens it next and says what is wrong."""
+    import sqlite3
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(16) != b"SQLite format 3\0":
+                return False
+    except OSError:
+        return True
+    try:
+        con = sqlite3.connect(f"{Path(path).resolve().as_uri()}?mode=ro", uri=True, timeout=5.0)
+    except sqlite3.Error:
+        return True
+    try:
+        return con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone() is not None
+    except sqlite3.OperationalError as exc:
+        return "no such table" not in str(exc)
+    except sqlite3.DatabaseError:
+        return False
+    finally:
+        con.close()
+
+
+def check_bench_out(out: str | Path, inputs=()) -> None:
+    """Refuse, before anything is written, an ``--out`` folder a bench would spoil: it must be new, empty, or an
+    earlier bench's (its results.sqlite is a bigcbf results database: the bench resumes), else a user's own
+    summary.md or episodes.csv would be overwritten. ``inputs``: the bench's scenario files; the folders of --out
+    that hold them are not counted (the generated and faults suites write their scenario files into
+    ``out/worlds`` and ``out/faults`` before the bench starts). A file where the folder should be is left to
+    :func:`_prepare_out`."""
+    out = Path(out)
+    if not out.is_dir():
+        return
+    try:
+        entries = set(os.listdir(out))
+    except OSError as exc:
+        raise UserError(f"cannot read the output directory ({exc.strerror or exc})", file=str(out)) from None
+    db = out / DB_NAME
+    if DB_NAME in entries and db.is_file() and db.stat().st_size > 0:
+        if is_results_db(db):
+            return
+        raise UserError(f"the output directory holds a {DB_NAME} that is not a bigcbf bench's; give --out a new or "
+                        "empty folder", file=str(out))
+    real_out = os.path.realpath(out)
+    held = set()
+    for p in inputs:
+        rel = os.path.relpath(os.path.realpath(p), real_out)
+        if not rel.startswith(os.pardir):
+            held.add(rel.split(os.sep)[0])
+    other = sorted(entries - _START_REMNANTS - held)
+    if other:
+        shown = ", ".join(other[:3]) + (", ..." if len(other) > 3 else "")
+        raise UserError(f"--out is neither empty nor an earlier bench's (it holds {shown} and no {DB_NAME}); a bench "
+                        "writes summary.md, episodes.csv and more there: give a new or empty folder", file=str(out))
+
+
 def _prepare_out(out: Path) -> Path:
     """The output directory, created and checked writable (also for --report-only: the reports are written)."""
     from ..outputs import check_output_dir
@@ -181,7 +243,13 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
     from tqdm import tqdm
 
     log = log or (lambda msg: tqdm.write(msg, file=sys.stderr))     # (above the progress bar, when there is one)
+    from ..outputs import check_distinct
+    from ..scenario import resolve_path
+
     tasks, methods, scenarios = plan(config)
+    scenario_files = {f"scenario {s}": resolve_path(s) for s in config.scenarios}
+    check_bench_out(config.out, scenario_files.values())
+    check_distinct(scenario_files, {f"the bench's {name}": Path(config.out) / name for name in OUTPUTS})
     out = _prepare_out(config.out)
     lock = _DirLock(out)
     t0 = time.perf_counter()
@@ -245,4 +313,4 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
     return outcome
 
 
-__all__ = ["BenchConfig", "BenchOutcome", "plan", "run_bench", "OUTPUTS", "DB_NAME"]
+__all__ = ["BenchConfig", "BenchOutcome", "plan", "run_bench", "check_bench_out", "OUTPUTS", "DB_NAME"]

@@ -75,6 +75,11 @@ class ResultStore:
         fresh = not self.path.exists() or self.path.stat().st_size == 0
         try:
             self.db = sqlite3.connect(self.path, timeout=30.0)
+            if not fresh and self.db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'meta'"
+                                             ).fetchone() is None:
+                self.db.close()               # another program's database: never add our tables to it
+                raise UserError("not a bigcbf results database (an SQLite file without its tables); use a new --out",
+                                file=str(self.path))
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")   # WAL + NORMAL: a committed row survives a killed process
             self.db.executescript(_SCHEMA)

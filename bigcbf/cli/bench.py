@@ -100,10 +100,19 @@ def config_from_args(args):
 
 
 def run(args) -> int:
-    from ..bench.report import check_docs_page, update_docs_page
-    from ..bench.runner import run_bench
+    from pathlib import Path
 
+    from ..bench.report import check_docs_page, update_docs_page
+    from ..bench.runner import OUTPUTS, check_bench_out, run_bench
+    from ..outputs import check_distinct
+    from ..scenario import resolve_path
+
+    check_bench_out(args.out)            # new, empty or an earlier bench's: before a suite writes its worlds there
     config = config_from_args(args)
+    inputs = {f"scenario {s}": resolve_path(s) for s in config.scenarios}
+    inputs.update({"--config": args.config, "--profile": args.profile})
+    outputs = {f"the bench's {name}": Path(config.out) / name for name in OUTPUTS}
+    check_distinct(inputs, {**outputs, "--docs": args.docs})
     if args.docs is not None:            # before the bench: a page that cannot take the results fails now
         check_docs_page(args.docs)
     progress = {"auto": None, "on": True, "off": False}[args.progress]

@@ -5,6 +5,10 @@ from .argtypes import float_in, path_arg, positive_float
 
 HELP = "calibrate tau95, the execution model (A, d, residual bound e_exec) and e_ZOH from a robot log"
 
+#: the files ``--report DIR`` may write (twin/report.py's write_report; a figure with nothing to show is left out):
+#: none of them may be the log or ``--out``
+REPORT_FILES = ("index.md", "command_response.png", "delay.png", "residuals.png", "limits.png", "calibration.json")
+
 
 def add_arguments(p):
     p.add_argument("log", type=path_arg, metavar="LOG", help="ROS 1 bag, ROS 2 bag folder or MCAP file")
@@ -32,9 +36,11 @@ def run(args) -> int:
     from twin.calibrate import CalibrationOptions, calibrate_series, read_log, summary_lines, write_profile
 
     from ..errors import UserError
-    from ..outputs import check_output_dir, check_output_file, strict_json
+    from ..outputs import check_distinct, check_output_dir, check_output_file, strict_json
     if args.no_scan and args.scan_topic is not None:
         raise UserError("--scan-topic and --no-scan contradict each other: give one")
+    report = {} if args.report is None else {f"--report's {n}": args.report / n for n in REPORT_FILES}
+    check_distinct({"log": args.log}, {"--out": args.out, **report})
     if args.out is not None:                 # before the work: a path that cannot be written fails now
         check_output_file(args.out, "profile")
     if args.report is not None:

@@ -43,9 +43,12 @@ def run(args) -> int:
     if duration < 30.0:
         raise UserError(f"a calibration drive for a stack profile needs at least 30 s, got {duration:g}",
                         field="--duration")
+    from ..outputs import check_distinct, check_output_file
+
+    check_distinct({"--robot-profile": robot}, {"--out": out, "--log": args.log})
     for path, what in ((out, "profile"), (args.log, "log")):
-        if path is not None and path.is_dir():
-            raise UserError(f"{what} path is a directory", file=str(path))
+        if path is not None:                 # before the drive: a path that cannot be written fails now
+            check_output_file(path, what)
     from twin.stackprofile import simulate_stack_profile
 
     res = simulate_stack_profile(robot, out, seed=args.seed, duration_s=duration,

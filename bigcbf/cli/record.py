@@ -27,7 +27,7 @@ def run(args) -> int:
     from ..params.robot import RobotProfile
     from ..params.toml_io import load
 
-    from ..outputs import check_output_file, strict_json
+    from ..outputs import check_distinct, check_output_file, strict_json
 
     profile = load(RobotProfile, args.robot_profile)
     if args.duration < 5.0:
@@ -35,6 +35,7 @@ def run(args) -> int:
     if args.duration > MAX_DURATION_S:
         raise UserError(f"a calibration drive is at most {MAX_DURATION_S:g} s, got {args.duration:g}",
                         field="--duration")
+    check_distinct({"--robot-profile": args.robot_profile}, {"--out": args.out})
     check_output_file(args.out, "log")
     from twin.record import record_calibration
 

@@ -25,9 +25,12 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from ..outputs import check_output_file, strict_json
+    from ..errors import UserError
+    from ..outputs import check_distinct, check_output_file, strict_json
     from ..params.toml_io import save
 
+    check_distinct({"log": args.log, "--profile": args.profile},
+                   {"--video": args.video, "--save-robot-profile": args.save_robot_profile})
     for path, what in ((args.video, "video"), (args.save_robot_profile, "robot profile")):
         if path is not None:                 # before the replay: a path that cannot be written fails now
             check_output_file(path, what)

@@ -36,6 +36,7 @@ def _list_families() -> None:
 
 def _generate(args) -> int:
     from ..errors import UserError
+    from ..outputs import check_distinct, check_output_file, write_text
     from ..worlds import FAMILIES, family, generate, parse
 
     if args.list:
@@ -52,15 +53,16 @@ def _generate(args) -> int:
             raise UserError("the file exists (use --force to overwrite it)", file=str(out))
         if not out.parent.is_dir():
             raise UserError("the folder does not exist", file=str(out.parent))
+        from ..scenario import all_scenario_files
+        # a shipped scenario is never overwritten, --force or not (the package's own files are its inputs)
+        check_distinct({f"shipped scenario {n}": p for n, p in all_scenario_files().items()}, {"--out": out})
+        check_output_file(out, "world")
     world = generate(args.family, args.seed)
     parse(world.toml)                     # what we write, the loader reads
     if out is None:
         print(world.toml, end="")
         return 0
-    try:
-        out.write_text(world.toml)
-    except OSError as exc:
-        raise UserError(f"cannot write the world ({exc.strerror})", file=str(out)) from None
+    write_text(out, world.toml, "world")
     print(f"wrote {out}: {world.name}, time limit {world.time_limit_s:.0f} s, shortest route "
           f"{world.path_length_m:.2f} m, {len(world.draft.pedestrians)} pedestrians")
     return 0
