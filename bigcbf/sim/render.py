@@ -6,6 +6,7 @@ the ffmpeg that imageio-ffmpeg ships, so they play in a browser.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -253,7 +254,8 @@ class VideoWriter:
     The video is written to a temporary file beside ``path`` and renamed to ``path`` by ``close()`` (an
     exception inside the ``with`` block, or ``abort()``, deletes it instead: an existing file at ``path`` is
     never half-overwritten). If ffmpeg stops (a full disk, say), ``write`` raises a UserError naming the path
-    and ffmpeg's reason."""
+    and ffmpeg's reason; if ffmpeg's exit is not clean when ``close`` finishes the file (a disk that fills while
+    it writes the last frames or the index), ``close`` raises that UserError and deletes the unfinished file."""
 
     def __init__(self, path: str | Path, fps: float = 20.0):
         import imageio_ffmpeg
@@ -262,6 +264,7 @@ class VideoWriter:
         self._ffmpeg = imageio_ffmpeg
         self._gen = None
         self._file = None
+        self._proc = None          # ffmpeg's process (imageio-ffmpeg does not check its exit status: we do)
         self.frames = 0
 
     def write(self, frame: np.ndarray) -> None:
@@ -275,6 +278,7 @@ class VideoWriter:
                                                       pix_fmt_out="yuv420p", quality=7, macro_block_size=16,
                                                       output_params=["-movflags", "+faststart"])
                 self._gen.send(None)
+                self._proc = _ffmpeg_process(self._gen)
             self._gen.send(frame)
         except OSError as exc:                   # BrokenPipeError included: ffmpeg has exited
             self.abort()
@@ -290,6 +294,11 @@ class VideoWriter:
             except (OSError, RuntimeError) as exc:
                 self.abort()
                 raise _ffmpeg_error(self.path, exc) from None
+            status = _exit_status(self._proc)
+            if status != 0:
+                self.abort()
+                from ..errors import UserError
+                raise UserError(f"cannot write the video ({_exit_reason(status)})", file=str(self.path))
         if self._file is not None:
             f, self._file = self._file, None
             f.commit()
@@ -302,6 +311,7 @@ class VideoWriter:
                 gen.close()
             except Exception:  # noqa: BLE001 - ffmpeg may already be gone; the file is deleted either way
                 pass
+        self._proc = None
         if self._file is not None:
             f, self._file = self._file, None
             f.discard()
@@ -314,6 +324,42 @@ class VideoWriter:
             self.close()
         else:
             self.abort()
+
+
+def _ffmpeg_process(gen):
+    """The ffmpeg process behind an imageio-ffmpeg ``write_frames`` generator once it has started (its local ``p``),
+    or None when the generator is not imageio-ffmpeg's (then only the pipe's errors are seen)."""
+    frame = getattr(gen, "gi_frame", None)
+    proc = frame.f_locals.get("p") if frame is not None else None
+    return proc if hasattr(proc, "poll") and hasattr(proc, "wait") else None
+
+
+def _exit_status(proc) -> int:
+    """ffmpeg's exit status after ``write_frames`` was closed (it waited for ffmpeg, or killed it); 0 without a
+    process to ask."""
+    if proc is None:
+        return 0
+    try:
+        status = proc.wait(timeout=30.0)
+    except Exception:  # noqa: BLE001 - a process that does not end is not a clean exit
+        proc.kill()
+        return -9
+    return int(status)
+
+
+def _exit_reason(status: int) -> str:
+    """ffmpeg's exit status in words: it exits with AVERROR(errno) = -errno, i.e. 256 - errno (228: no space left on
+    the device); a negative status is the signal that killed it (SIGXFSZ: a file size limit)."""
+    import signal
+    if status < 0:
+        try:
+            name = signal.strsignal(-status) or f"signal {-status}"
+        except ValueError:
+            name = f"signal {-status}"
+        return f"ffmpeg was stopped: {name}"
+    if 128 < status < 256:
+        return f"ffmpeg failed: {os.strerror(256 - status)}"
+    return f"ffmpeg failed with exit status {status}"
 
 
 def _ffmpeg_error(path: Path, exc: BaseException):
