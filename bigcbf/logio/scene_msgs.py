@@ -10,8 +10,8 @@ stay in ``odom``.
 Occupancy grid (nav_msgs/OccupancyGrid, as Nav2's map_server publishes it): the scenario's area -- the bounding
 box of its declared area (``extent`` about the midpoint of start and goal, as the video's top view), its walls,
 boxes and cylinders, the robot's start and goal and the pedestrians' start -- is known: 100 where a cell's
-inscribed disc (radius = resolution / 2) touches a wall, box or cylinder, else 0 (pedestrians move: they are not
-in the map). A margin of ``UNKNOWN_MARGIN_M`` around it is unknown (-1). The resolution is 0.05 m, coarser for
+inscribed disc (radius = resolution / 2) overlaps a wall, box or cylinder, else 0 (a cell that only shares an edge
+with an obstacle is free; pedestrians move: they are not in the map). A margin of ``UNKNOWN_MARGIN_M`` around it is unknown (-1). The resolution is 0.05 m, coarser for
 scenes too large for ``MAX_CELLS`` cells at that resolution (0.1, 0.2, 0.25, 0.5, 1, 2, 5 m).
 """
 from __future__ import annotations
@@ -121,16 +121,16 @@ def rasterize(scene, resolution: float | None = None) -> tuple[np.ndarray, tuple
     known = (X >= x0) & (X <= x1) & (Y >= y0) & (Y <= y1)
     grid[known] = FREE
     occ = np.zeros((ny, nx), bool)
-    reach = res / 2                                    # the cell's inscribed disc touches the obstacle
+    reach = res / 2 - 1e-9                             # the cell's inscribed disc overlaps the obstacle
     rects = [wall_rect(w) for w in scene.walls] + [(b.x, b.y, b.half_x, b.half_y, b.yaw) for b in scene.boxes]
     for cx, cy, hx, hy, yaw in rects:
         c, s = math.cos(yaw), math.sin(yaw)
         dx, dy = X - cx, Y - cy
         qx = np.maximum(np.abs(c * dx + s * dy) - hx, 0.0)
         qy = np.maximum(np.abs(-s * dx + c * dy) - hy, 0.0)
-        occ |= qx * qx + qy * qy <= reach * reach
+        occ |= qx * qx + qy * qy < reach * reach
     for cyl in scene.cylinders:
-        occ |= np.hypot(X - cyl.x, Y - cyl.y) <= cyl.radius + reach
+        occ |= np.hypot(X - cyl.x, Y - cyl.y) < cyl.radius + reach
     grid[occ] = OCCUPIED
     return grid, (ox, oy), res
 

@@ -1,0 +1,96 @@
+"""An interrupted ``bigcbf run --log X.mcap``: Ctrl-C (SIGINT) or SIGTERM keeps what was recorded as X.partial.mcap,
+a complete MCAP (summary and footer) that rosbags reads, never X.mcap, and leaves no temporary file.
+
+The command runs in a real subprocess, its signal handling as ``bigcbf run`` installs it
+(``bigcbf.logio.interrupts.interrupts_as_keyboard_interrupt`` around the CLI's main); the signal comes once the
+log has been open for 2 s (several seconds into the simulated episode)."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from bigcbf.logio import LogWriter
+from bigcbf.logio.writer import partial_path
+from bigcbf.types import RobotState
+
+# an open floor with a far goal: the episode outlasts the test by far
+SCENARIO = """name = "long_drive"
+description = "Open floor, a goal 100 m away."
+time_limit_s = 300.0
+extent_m = 5.0
+
+[robot]
+start = [0.0, 0.0, 0.0]
+goal = [100.0, 0.0]
+"""
+DRIVER = ("import sys\n"
+          "from bigcbf.cli import main\n"
+          "from bigcbf.logio.interrupts import interrupts_as_keyboard_interrupt\n"
+          "with interrupts_as_keyboard_interrupt():\n"
+          "    status = main(sys.argv[1:])\n"
+          "sys.exit(status)\n")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_an_interrupted_run_keeps_a_valid_partial_log(tmp_path, sig):
+    scenario = tmp_path / "long_drive.toml"
+    scenario.write_text(SCENARIO)
+    out = tmp_path / "out"
+    log = out / "run.mcap"
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    proc = subprocess.Popen([sys.executable, "-c", DRIVER, "run", str(scenario), "--log", str(log)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:    # the log opens as the episode starts
+            if out.exists() and list(out.glob(".run.*.tmp.mcap")):
+                break
+            time.sleep(0.05)
+        time.sleep(2.0)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "bigcbf run: interrupted"
+    assert sorted(p.name for p in out.iterdir()) == ["run.partial.mcap"]      # no run.mcap, no temporary file
+    partial = out / "run.partial.mcap"
+    with open(partial, "rb") as fh:
+        summary = make_reader(fh).get_summary()                              # the footer points to a summary
+    assert summary is not None and summary.statistics.message_count > 0
+    counts, last = {}, 0
+    with AnyReader([partial]) as reader:
+        for con, t, raw in reader.messages():
+            reader.deserialize(raw, con.msgtype)
+            counts[con.topic] = counts.get(con.topic, 0) + 1
+            last = max(last, t)
+    assert sum(counts.values()) == summary.statistics.message_count
+    assert {"/tf_static", "/robot_description", "/goal_pose", "/map"} <= set(counts)
+    # whole control steps: every step's messages are in (an interrupt waits for the step's last one)
+    assert counts["/clock"] == counts["/tf"] == counts["/odom"] == counts["/behavior"] >= 20
+    assert last >= 1e9
+
+
+def test_finish_partial_replaces_an_older_partial_and_keeps_the_final_path(tmp_path):
+    final = tmp_path / "x.mcap"
+    final.write_bytes(b"the previous run's log")
+    partial_path(final).write_bytes(b"an older partial log")
+    w = LogWriter(final)
+    for k in range(3):
+        w.odom(0.1 * k, RobotState(0.1 * k, 0, 0, 1, 0, 0))
+    assert w.finish_partial() == partial_path(final) == tmp_path / "x.partial.mcap"
+    assert final.read_bytes() == b"the previous run's log"                  # the final file is untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.mcap", "x.partial.mcap"]
+    with AnyReader([partial_path(final)]) as reader:
+        assert [t for _, t, _ in reader.messages()] == [0, 100_000_000, 200_000_000]
+    assert w.finish_partial() is None                                        # once
+    w.close()                                                                # then a no-op
+    assert partial_path(Path("a/b.log")) == Path("a/b.log.partial.mcap")
