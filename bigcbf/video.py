@@ -10,8 +10,11 @@ What a frame shows (the legend in a band below the scene names each item present
   white), their track id (``#id``) and their velocity over 1 s (blue arrows, dynamic tracks); wall points as
   small amber dots;
 - BIG-CBF's imagination (Eq. (9)): the six behaviors' imagined paths of the latest selection (grey when accepted
-  by Eq. (16), red when rejected), the selected behavior's path thick cyan, path ends labelled with their behavior
-  (in the top view only the selected one's); for other methods the path the method reports (cyan);
+  by Eq. (16), red when rejected) and the path the robot follows thick cyan (the selected behavior's, or the
+  fallback's release path), for other methods the path the method reports (cyan). The cyan path's end is labelled
+  with the step's behavior mode in cyan; in the track view the other behaviors' ends are labelled with their own
+  modes in grey, each only where it does not cover a label already drawn (the top view is crowded: the cyan one
+  only). ``Overlay.last_labels`` lists what the latest frame labelled, and where;
 - the goal (green disc, in the scene).
 
 Text: method, time, behavior mode, speed, whether the CBF is active (and a red bar at the bottom while it is).
@@ -20,12 +23,13 @@ H.264 MP4 via bigcbf.sim.render.VideoWriter.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from .episode import Episode, StepRecord
-from .sim.render import (Renderer, VideoWriter, add_arrow, add_disc, add_points, add_polyline, add_ring, draw_legend,
-                         meters_per_pixel, project, put_label, put_text, with_legend_strip)
+from .sim.render import (Renderer, VideoWriter, add_arrow, add_disc, add_points, add_polyline, add_ring, boxes_overlap,
+                         draw_legend, label_box, meters_per_pixel, project, put_label, put_text, with_legend_strip)
 
 CBF_ACTIVE_RGB = (255, 90, 60)
 
@@ -42,6 +46,11 @@ TRAIL_RGBA = (1.0, 0.4, 0.85, 0.9)
 ROBOT_RGBA = (0.97, 0.97, 0.97, 0.95)
 HEADING_RGBA = (0.1, 0.1, 0.1, 1.0)
 GOAL_RGBA = (0.1, 0.9, 0.2, 0.8)
+#: label text colours (RGB): the followed path's behavior, the other imagined behaviors, track ids
+SELECTED_TEXT_RGB = (60, 240, 240)
+IMAGINED_TEXT_RGB = (200, 200, 200)
+TRACK_TEXT_RGB = (255, 200, 60)
+BEHAVIOR_LABEL_SCALE = 0.36
 
 #: overlays above everything in the top view (pedestrians are 1.7 m tall); at their own height in the track view
 TOP_VIEW_Z = 1.75
@@ -49,6 +58,16 @@ TOP_VIEW_Z = 1.75
 ROBOT_ICON_PX = 9.0
 #: the trail keeps one point per this many control steps (0.2 s at T_C = 50 ms)
 TRAIL_EVERY = 4
+
+
+class Label(NamedTuple):
+    """A text a frame shows next to something in the scene: ``kind`` "selected" (the cyan path's end: the step's
+    mode), "imagined" (another behavior's imagined path end) or "track" (a track id); ``uv`` the pixel it labels,
+    ``box`` (x0, y0, x1, y1) the pixels its dark box covers."""
+    text: str
+    kind: str
+    uv: tuple[float, float]
+    box: tuple[int, int, int, int]
 
 
 class Overlay:
@@ -62,6 +81,7 @@ class Overlay:
         self.title = title or episode.method or "external"
         self.mpp = meters_per_pixel(episode.world.model, camera, renderer.height)   # None: perspective (track)
         self.trail: list[tuple[float, float]] = []
+        self.last_labels: list[Label] = []      # what the latest frame labelled (tests, tools)
         self._n = 0
         laser = getattr(getattr(episode.perception, "params", None), "laser_x_m", 0.0)
         self.laser_xy = (float(laser), float(getattr(episode.perception.params, "laser_y_m", 0.0)))
@@ -134,7 +154,8 @@ class Overlay:
         data = self.ep.world.data
         frame = self.renderer.render(data, self.camera, decorate=decorate)
         model, W, H = self.ep.world.model, self.renderer.width, self.renderer.height
-        # labels: track ids next to the tracks, behavior names at the ends of the imagined paths
+        self.last_labels = labels = []
+        # track ids next to the tracks
         tracked = np.flatnonzero(obs.ids >= 0)
         if len(tracked):
             p = obs.p[tracked]
@@ -142,15 +163,10 @@ class Overlay:
             uv, front = project(model, data, self.camera, pts, W, H)
             for k, i in enumerate(tracked):
                 if front[k]:
-                    put_label(frame, f"#{int(obs.ids[i])}", uv[k] + (7, -7), color=(255, 200, 60))
-        if img is not None:
-            ends = np.array([img.p[b][-1] for b in range(len(img.modes))])
-            uv, front = project(model, data, self.camera, np.column_stack([ends, np.full(len(ends), z0 + 0.03)]), W, H)
-            for b, mode in enumerate(img.modes):     # the top view is crowded: only the selected one there
-                sel = mode == rec.mode
-                if img.available[b] and front[b] and (sel or not top):
-                    put_label(frame, mode, uv[b] + (4, 4), scale=0.36,
-                              color=(60, 240, 240) if sel else (200, 200, 200))
+                    text = f"#{int(obs.ids[i])}"
+                    box = put_label(frame, text, uv[k] + (7, -7), color=TRACK_TEXT_RGB)
+                    labels.append(Label(text, "track", (float(uv[k][0]), float(uv[k][1])), box))
+        self._behavior_labels(frame, rec, img, z0, top, labels)
         speed = float(np.hypot(ts.vx, ts.vy))
         put_text(frame, [f"{self.title}   t = {rec.t:5.2f} s",
                          f"mode {rec.mode}   speed {speed:.2f} m/s",
@@ -165,6 +181,32 @@ class Overlay:
         if self.legend_style == "box":
             draw_legend(frame, items)
         return frame
+
+    def _behavior_labels(self, frame, rec: StepRecord, img, z0: float, top: bool, labels: list[Label]) -> None:
+        """The cyan path's end labelled with the step's mode (the behavior the robot follows); in the track view
+        the other imagined paths' ends with their own modes in grey, skipped where one would cover a behavior
+        label already drawn. (The imagination is up to T_B old and its paths of different behaviors may end at one
+        point: a label taken from it for the cyan path could name another behavior.)"""
+        model, data, W, H = self.ep.world.model, self.ep.world.data, self.renderer.width, self.renderer.height
+        drawn = []
+        if rec.path is not None and len(rec.path) > 1:
+            end = np.array([[rec.path[-1][0], rec.path[-1][1], z0 + 0.03]])
+            uv, front = project(model, data, self.camera, end, W, H)
+            if front[0]:
+                box = put_label(frame, rec.mode, uv[0] + (4, 4), scale=BEHAVIOR_LABEL_SCALE, color=SELECTED_TEXT_RGB)
+                drawn.append(Label(rec.mode, "selected", (float(uv[0][0]), float(uv[0][1])), box))
+        if img is not None and not top:
+            ends = np.array([[img.p[b][-1][0], img.p[b][-1][1], z0 + 0.03] for b in range(len(img.modes))])
+            uv, front = project(model, data, self.camera, ends, W, H)
+            for b, mode in enumerate(img.modes):
+                if mode == rec.mode or not img.available[b] or not front[b]:
+                    continue
+                box = label_box(frame.shape, mode, uv[b] + (4, 4), BEHAVIOR_LABEL_SCALE)
+                if any(boxes_overlap(box, d.box, gap=1) for d in drawn):
+                    continue
+                put_label(frame, mode, uv[b] + (4, 4), scale=BEHAVIOR_LABEL_SCALE, color=IMAGINED_TEXT_RGB)
+                drawn.append(Label(mode, "imagined", (float(uv[b][0]), float(uv[b][1])), box))
+        labels.extend(drawn)
 
     def legend(self, imagination: bool, path: bool) -> list[tuple[str, tuple, str]]:
         items = [("robot, trail", TRAIL_RGBA, "line"), ("LiDAR hits", LIDAR_RGBA, "dot"),

@@ -1,5 +1,6 @@
 """Video overlays: the projection that places labels agrees with the renderer, and a frame shows what the legend
-names (the robot's trail, BIG-CBF's imagined paths with the selected one, the legend band)."""
+names (the robot's trail, BIG-CBF's imagined paths with the selected one, the legend band), behavior labels
+that name what the cyan path is."""
 import numpy as np
 import pytest
 
@@ -9,7 +10,7 @@ from bigcbf.scenario import load_scenario
 from bigcbf.sim.render import Renderer, add_points, project
 from bigcbf.sim.scene import SceneSpec
 from bigcbf.sim.world import SimWorld
-from bigcbf.video import Overlay
+from bigcbf.video import TOP_VIEW_Z, Overlay
 
 
 @pytest.mark.parametrize("camera", ["top", "track"])
@@ -59,3 +60,52 @@ def test_a_frame_shows_the_trail_the_imagined_paths_and_the_legend():
     assert _cyan(scene_later) > 20                                            # the selected imagined path
     img = ep.planner.last_imagination
     assert img is not None and int(img.available.sum()) >= 5                   # the six behaviors' paths drawn
+
+
+def _box_pixels(frame, box):
+    x0, y0, x1, y1 = box
+    return frame[max(y0, 0):y1, max(x0, 0):x1].astype(int)
+
+
+@pytest.mark.parametrize("camera", ["track", "top"])
+def test_the_cyan_path_is_labelled_with_the_steps_mode(camera):
+    """At 8.6 s of required_sidestepping (seed 0) the robot follows GOAL, and the latest imagination's PASS-R path
+    ends where GOAL's does: the track view labelled the cyan path PASS-R. The label at the cyan path's end is the
+    step's mode, drawn in cyan, and no other label covers it."""
+    from bigcbf.api import load_config       # as `bigcbf run` (the default configuration)
+    ep = Episode.from_config(load_scenario("required_sidestepping", 0), "big-cbf", 0, load_config(None, None),
+                             time_limit_s=8.7)
+    checked = []
+    with Renderer(ep.world.model, 640, 480) as r:
+        overlay = Overlay(ep, r, camera)
+
+        def observe(rec):
+            overlay.observe(rec)
+            if not any(abs(rec.t - t) < 0.026 for t in (3.0, 6.0, 8.6)) or rec.path is None:
+                return
+            frame = overlay.frame(rec)[:480]
+            selected = [lab for lab in overlay.last_labels if lab.kind == "selected"]
+            assert [lab.text for lab in selected] == [rec.mode]
+            lab = selected[0]
+            end = np.array([[*rec.path[-1], (TOP_VIEW_Z if camera == "top" else 0.0) + 0.03]])
+            uv, front = project(ep.world.model, ep.world.data, camera, end, 640, 480)
+            assert front[0] and np.hypot(*(uv[0] - lab.uv)) < 1.5       # placed at the cyan path's own end
+            u, v = int(lab.uv[0]), int(lab.uv[1])
+            assert _cyan(frame[max(v - 12, 0):v + 12, max(u - 12, 0):u + 12]) > 3   # the cyan path is there
+            px = _box_pixels(frame, lab.box)
+            text_cyan = (px[..., 1] > 150) & (px[..., 2] > 150) & (px[..., 0] < 150)
+            r, g, b = px[..., 0], px[..., 1], px[..., 2]
+            text_grey = (r > 110) & (np.abs(r - g) < 25) & (np.abs(g - b) < 25)
+            assert text_cyan.sum() > 15 and text_grey.sum() < 3              # drawn in cyan, nothing written over it
+            for other in overlay.last_labels:
+                if other.kind == "imagined":
+                    assert other.text != rec.mode
+                    x0, y0, x1, y1 = other.box
+                    assert x1 <= lab.box[0] or lab.box[2] <= x0 or y1 <= lab.box[1] or lab.box[3] <= y0
+            if camera == "top":
+                assert not any(other.kind == "imagined" for other in overlay.last_labels)
+            checked.append((round(rec.t, 2), rec.mode))
+
+        ep.observers.append(observe)
+        ep.run()
+    assert len(checked) == 3 and checked[-1] == (8.6, "GOAL")

@@ -147,15 +147,28 @@ def project(model: mujoco.MjModel, data: mujoco.MjData, camera: str, points: np.
     return uv, front
 
 
-def put_label(frame: np.ndarray, text: str, uv, scale: float = 0.42, color=(255, 255, 255)) -> None:
-    """A short text (e.g. a track id) with its lower-left corner at pixel ``uv``, on a dark box; clipped to the
-    frame."""
-    h, w = frame.shape[:2]
+def label_box(shape, text: str, uv, scale: float = 0.42) -> tuple[int, int, int, int]:
+    """The box (x0, y0, x1, y1) in pixels that :func:`put_label` fills for ``text`` at ``uv`` in a frame of
+    ``shape`` (the text's lower-left corner at ``uv``, clipped to the frame)."""
+    h, w = shape[:2]
     (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
     x = int(np.clip(uv[0], 2, w - tw - 4))
     y = int(np.clip(uv[1], th + 4, h - 4))
-    cv2.rectangle(frame, (x - 2, y - th - 3), (x + tw + 2, y + 3), (20, 20, 20), -1)
-    cv2.putText(frame, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
+    return x - 2, y - th - 3, x + tw + 2, y + 3
+
+
+def boxes_overlap(a, b, gap: int = 0) -> bool:
+    """Two boxes (x0, y0, x1, y1) overlap, or come closer than ``gap`` pixels."""
+    return a[0] < b[2] + gap and b[0] < a[2] + gap and a[1] < b[3] + gap and b[1] < a[3] + gap
+
+
+def put_label(frame: np.ndarray, text: str, uv, scale: float = 0.42, color=(255, 255, 255)) -> tuple:
+    """A short text (e.g. a track id) with its lower-left corner at pixel ``uv``, on a dark box; clipped to the
+    frame. Returns the box it filled (:func:`label_box`)."""
+    box = label_box(frame.shape, text, uv, scale)
+    cv2.rectangle(frame, box[:2], box[2:], (20, 20, 20), -1)
+    cv2.putText(frame, text, (box[0] + 2, box[3] - 3), cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
+    return box
 
 
 def draw_legend(frame: np.ndarray, items: Iterable[tuple[str, tuple, str]], corner: str = "bottom-right",
