@@ -38,9 +38,9 @@ def test_demo_prints_commanded_and_achieved(capsys):
 @pytest.mark.parametrize("argv, message", [
     (["run", "required_sidestepping", "--seed", "-1"], "argument --seed: expected a seed in [0, 4294967295], got -1"),
     (["run", "required_sidestepping", "--seed", "1.5"], "argument --seed: expected a whole number, got '1.5'"),
-    (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "inf"],
+    (["record", "calibration", "--robot-profile", "x3_sim", "--out", "o.mcap", "--duration", "inf"],
      "argument --duration: expected a finite number, got 'inf'"),
-    (["record", "calibration", "--robot-profile", "p.toml", "--out", "o.mcap", "--duration", "0"],
+    (["record", "calibration", "--robot-profile", "x3_sim", "--out", "o.mcap", "--duration", "0"],
      "argument --duration: expected a number > 0, got 0"),
     (["calibrate", "log.mcap", "--coverage", "1.2"], "argument --coverage: expected a coverage in [0.5, 1), got 1.2"),
     (["perf", "--only", "bigcbf.nope"], "--only: unknown provider(s) bigcbf.nope; known: bigcbf.sim.perf"),

@@ -270,3 +270,20 @@ def _forget_imported_plugins():
     yield
     for mod in ("bad_planners", "my_planners"):
         sys.modules.pop(mod, None)
+
+
+@pytest.mark.parametrize("cls", ["Obstacles", "RobotState"])
+def test_the_extending_pages_tables_name_every_field(cls):
+    """docs/extending.md's tables of what plan() receives list exactly the dataclass's fields, each with a unit."""
+    import bigcbf.types
+
+    page = (ROOT / "docs" / "extending.md").read_text().split("\n")
+    start = next(i for i, line in enumerate(page) if line.startswith(f"| `{cls}` field |"))
+    rows = []
+    for line in page[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[2], line                       # the unit column is filled ("-" where there is none)
+        rows += [n for n in re.findall(r"`([\w.]+)`", cells[0]) if not n.startswith(".")]
+    assert rows == [f.name for f in dataclasses.fields(getattr(bigcbf.types, cls))]
