@@ -8,8 +8,14 @@
     out = bigcbf.run_bench("results/", methods=["cbf-only", "big-cbf"], seeds=range(3), workers=2)
     print(out.summary["methods"]["big-cbf"]["success_pct"])                      # -> BenchOutcome
 
-Every function calls the same code as its subcommand (``bigcbf run``, ``bigcbf bench``); mistakes in the
-arguments or files raise :class:`bigcbf.errors.UserError` with the one-line message the command prints.
+Every function calls the same code as its subcommand (``bigcbf run``, ``bigcbf bench``) and checks its arguments
+with the same rules (:mod:`bigcbf.validate`, shared with the Gymnasium environment): every mistake in the arguments
+or files raises :class:`bigcbf.errors.UserError`, one line naming the field (seeds are whole numbers in
+[0, 4294967295], a time limit is in (0, 600] s, a list of methods, scenarios or seeds is not empty, ...).
+
+:func:`run_bench` on the local engine starts worker processes that import the calling script afresh (the
+``spawn`` start method), so a script calls it under ``if __name__ == "__main__":``; an unguarded call at a
+script's top level is a UserError before any work.
 
 Calibration and replay live in the ``twin`` package's API (``twin.calibrate_log(log) -> twin.Calibration``,
 ``twin.replay_log(log, profile) -> twin.ReplayResult``, see ``twin/__init__.py``), not here: ``twin`` builds on
@@ -17,11 +23,18 @@ Calibration and replay live in the ``twin`` package's API (``twin.calibrate_log(
 """
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from .config import RunConfig, load_run_config
 from .errors import UserError
+from .validate import (check_callable, check_choice, check_names, check_path, check_seed, check_seeds,
+                       check_time_limit, check_workers)
+
+#: the cameras of a video (``bigcbf run --camera``)
+CAMERAS = ("top", "track")
 
 __all__ = ["RunConfig", "load_config", "run_episode", "run_bench", "bench_config", "scenarios", "methods",
            "load_scenario"]
@@ -37,6 +50,12 @@ def load_config(config: str | Path | RunConfig | None = None, profile: str | Pat
     none are reported."""
     from .params.stack import load_stack_params
 
+    if not isinstance(config, RunConfig):
+        check_path(config, "config", "a RunConfig or the path of a run configuration TOML file")
+    profile = check_path(profile, "profile", "the path of a stack parameter (profile) TOML file")
+    if base is not None and not isinstance(base, RunConfig):
+        raise UserError(f"expected a RunConfig or None, got {type(base).__name__}", field="base")
+    check_callable(notes, "notes")
     if isinstance(config, RunConfig):
         cfg = config
     elif config is not None:
@@ -54,13 +73,16 @@ def load_config(config: str | Path | RunConfig | None = None, profile: str | Pat
 
 
 def load_scenario(scenario, seed: int = 0):
-    """A scenario (a name from :func:`scenarios`, a path to a TOML file, or a Scenario) drawn for ``seed``."""
+    """A scenario (a name from :func:`scenarios`, a path to a TOML file, or a Scenario, returned as it is) drawn for
+    ``seed`` (a whole number in [0, 4294967295])."""
     from .scenario import Scenario
     from .scenario import load_scenario as _load
 
+    seed = check_seed(seed)
     if isinstance(scenario, Scenario):
         return scenario
-    return _load(scenario, seed)
+    check_path(scenario, "scenario", "a scenario name, a scenario TOML file path or a Scenario", optional=False)
+    return _load(os.fspath(scenario), seed)
 
 
 def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str | Path | RunConfig | None = None,
@@ -73,14 +95,26 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
     method, an entry point of ``bigcbf.methods`` or ``package.module:Class``. ``config``/``profile``: see
     :func:`load_config`. ``video``: an H.264 MP4 (``camera`` top or track); ``log``: a ROS 2 MCAP; ``live``: a
     :class:`bigcbf.logio.live.LiveWriter` to stream the log's topics to Foxglove (paced at real time).
-    ``observers``: callables that receive every control step's :class:`bigcbf.episode.StepRecord`.
+    ``observers``: callables that receive every control step's :class:`bigcbf.episode.StepRecord`. ``seed``: a
+    whole number in [0, 4294967295]; ``time_limit_s``: in (0, 600] s (default: the scenario's).
     """
     from .control.methods import resolve_method
     from .episode import PERCEPTION_MODES, Episode
 
+    seed = check_seed(seed)
     if perception not in PERCEPTION_MODES:
-        raise UserError(f"perception must be one of {', '.join(PERCEPTION_MODES)}, got {perception!r}")
+        raise UserError(f"perception must be one of {', '.join(PERCEPTION_MODES)}, got {perception!r}"[:160])
+    check_choice(camera, CAMERAS, "camera")
+    video = check_path(video, "video", "a video file path")
+    log = check_path(log, "log", "a log file path")
+    if isinstance(observers, (str, bytes)) or not isinstance(observers, Iterable):
+        raise UserError(f"expected a list of functions, got {type(observers).__name__}", field="observers")
+    observers = list(observers)
+    for f in observers:
+        check_callable(f, "observers", optional=False)
     sc = load_scenario(scenario, seed)
+    if time_limit_s is not None:
+        time_limit_s = check_time_limit(time_limit_s, sc)
     resolve_method(method)
     cfg = load_config(config, profile)
     from .outputs import check_output_file
@@ -121,43 +155,57 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     its options). ``seeds``: a count N (seeds 0..N-1) or the seeds themselves; default the suite's count.
     ``methods``: default every registered method. ``scenarios``: default the suite's (``split``: only that split
     of a suite that has splits, e.g. generated's dev or test). The run configuration is the suite's stack
-    parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`)."""
-    import os
+    parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`).
 
+    Checked as ``bigcbf bench`` checks its options, before anything is written: ``seeds`` a count in [1, 10000]
+    or 1 to 10000 seeds in [0, 4294967295]; ``methods`` and ``scenarios`` non-empty lists (None: the default);
+    ``workers`` a whole number from 1 to 4 per core (local engine) or to 10000 (Ray). A mistake is a UserError
+    naming the field."""
     from .bench.engines import ENGINES, ray_available
     from .bench.paper import METHOD_ORDER, ordered
     from .bench.runner import BenchConfig
     from .bench.suites import SUITES
     from .control.methods import METHODS, resolve_method
 
+    out = check_path(out, "out", "an output folder path", optional=False)
+    method_list = check_names(methods, "methods", "methods")
+    scenario_list = check_names(scenarios, "scenarios", "scenarios")
     if engine not in ENGINES:
-        raise UserError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        raise UserError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}"[:160])
+    if ray_address is not None and (not isinstance(ray_address, str) or not ray_address.strip()):
+        raise UserError(f"expected a Ray address (e.g. auto or ray://head:10001), got {ray_address!r}"[:160],
+                        field="ray_address")
     if ray_address is not None and engine != "ray":
         raise UserError("--ray-address needs --engine ray")
     if engine == "ray" and not ray_available():
         raise UserError("--engine ray needs Ray, which is not installed: pip install 'bigcbf[ray]'")
     if perception not in ("lidar", "truth"):
-        raise UserError(f"--perception must be lidar or truth, got {perception!r}")
+        raise UserError(f"--perception must be lidar or truth, got {perception!r}"[:160])
+    if not isinstance(suite, str):
+        raise UserError(f"expected a suite name, got {suite!r}"[:160], field="suite")
+    if split is not None and not isinstance(split, str):
+        raise UserError(f"expected a split name, got {split!r}"[:160], field="split")
+    check_callable(notes, "notes")
     s = SUITES.get(suite)
-    if seeds is None:
-        seeds = s.default_seeds
-    seed_list = tuple(range(seeds)) if isinstance(seeds, int) else tuple(int(x) for x in seeds)
+    seed_list = check_seeds(s.default_seeds if seeds is None else seeds)
+    workers = check_workers(workers, engine)
     if workers is None and engine == "local":
         workers = os.cpu_count() or 1
-    method_list = tuple(methods) if methods else tuple(ordered(METHODS.names(), METHOD_ORDER))
+    if method_list is None:
+        method_list = tuple(ordered(METHODS.names(), METHOD_ORDER))
     for m in method_list:
         resolve_method(m)
-    out = Path(out)
     if split is not None:
         if not s.splits:
             raise UserError(f"suite {suite!r} has no splits (--split is for suites such as generated)")
         if split not in s.splits:
             raise UserError(f"suite {suite!r} has no split {split!r}; known: {', '.join(s.splits)}")
-        if scenarios:
+        if scenario_list:
             raise UserError("--split selects among the suite's scenarios; drop it when giving --scenarios")
-    entries = s.entries(out, split) if s.splits else s.entries(out)
-    if scenarios:
-        scenario_list = tuple(str(x) for x in scenarios)
+    base = RunConfig(stack=s.params()) if s.params is not None else None
+    cfg = load_config(config, profile, base=base, notes=notes)
+    entries = s.entries(out, split) if s.splits else s.entries(out)     # (a suite may write its scenario files)
+    if scenario_list:
         # scenarios given by path that are files of the suite keep their split and family in the reports
         known = {Path(e.scenario).resolve(): e for e in entries if e.split or e.family}
         labels = tuple((x, known[Path(x).resolve()].split, known[Path(x).resolve()].family) for x in scenario_list
@@ -165,19 +213,150 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     else:
         scenario_list = tuple(str(e.scenario) for e in entries)
         labels = tuple((str(e.scenario), e.split, e.family) for e in entries if e.split or e.family)
-    base = RunConfig(stack=s.params()) if s.params is not None else None
-    cfg = load_config(config, profile, base=base, notes=notes)
     return BenchConfig(out=out, methods=method_list, scenarios=scenario_list, seeds=seed_list, workers=workers,
                        engine=engine, ray_address=ray_address, config=cfg, perception=perception, labels=labels,
-                       suite=None if scenarios else s.name)
+                       suite=None if scenarios is not None else s.name)
+
+
+#: what run_bench says when a script calls it at its top level, where every bench worker would run it again
+UNGUARDED_MESSAGE = ('put the call under `if __name__ == "__main__":` (bench workers are fresh Python processes that '
+                     'import your script)')
+
+
+def _called_from_reimported_main() -> bool:
+    """True in a worker process of the local engine that is importing the user's script (``spawn`` runs the main
+    script there as ``__mp_main__``): a frame of that module's top-level code is on the stack."""
+    f = sys._getframe(1)
+    while f is not None:
+        if f.f_code.co_name == "<module>" and f.f_globals.get("__name__") == "__mp_main__":
+            return True
+        f = f.f_back
+    return False
+
+
+def _worker_branch(test) -> bool | None:
+    """What ``test`` (an ``if``'s condition) is in a worker, where the script's ``__name__`` is ``"__mp_main__"``:
+    True or False when it is a comparison of ``__name__`` with a string (or not/and/or of such), None when it
+    cannot be told."""
+    import ast
+
+    if isinstance(test, ast.UnaryOp) and isinstance(test.op, ast.Not):
+        v = _worker_branch(test.operand)
+        return None if v is None else not v
+    if isinstance(test, ast.BoolOp):
+        vals = [_worker_branch(v) for v in test.values]
+        if isinstance(test.op, ast.And):
+            return False if False in vals else (True if all(v is True for v in vals) else None)
+        return True if True in vals else (False if all(v is False for v in vals) else None)
+    if isinstance(test, ast.Compare) and len(test.ops) == 1:
+        left, right = test.left, test.comparators[0]
+        if isinstance(right, ast.Name) and right.id == "__name__":
+            left, right = right, left
+        if (isinstance(left, ast.Name) and left.id == "__name__" and isinstance(right, ast.Constant)
+                and isinstance(right.value, str)):
+            op, name = test.ops[0], "__mp_main__"
+            if isinstance(op, (ast.Eq, ast.Is)):
+                return name == right.value
+            if isinstance(op, (ast.NotEq, ast.IsNot)):
+                return name != right.value
+            if isinstance(op, ast.In):
+                return name in right.value
+            if isinstance(op, ast.NotIn):
+                return name not in right.value
+    return None
+
+
+def _runs_in_workers(stmts, line: int) -> bool:
+    """Whether the statement of ``line`` among the module-level ``stmts`` would run again when a worker imports the
+    script: not inside an ``if __name__ == "__main__":`` block (or a function or class body). An ``if`` whose
+    condition cannot be told gets the benefit of the doubt (only a call known to run again is refused)."""
+    import ast
+
+    for node in stmts:
+        if not node.lineno <= line <= (node.end_lineno or node.lineno):
+            continue
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            return False
+        if isinstance(node, ast.If):
+            for branch, taken_when in ((node.body, True), (node.orelse, False)):
+                if any(s.lineno <= line <= (s.end_lineno or s.lineno) for s in branch):
+                    v = _worker_branch(node.test)
+                    if v is None or v != taken_when:
+                        return False
+                    return _runs_in_workers(branch, line)
+            return True                                    # in the condition itself
+        inner = []                       # the statements of a for, while, with, try or match
+        for name in ("body", "orelse", "finalbody", "handlers", "cases"):
+            for child in getattr(node, name, None) or ():
+                inner.extend(child.body if isinstance(child, (ast.ExceptHandler, ast.match_case)) else [child])
+        if inner and any(s.lineno <= line <= (s.end_lineno or s.lineno) for s in inner):
+            return _runs_in_workers(inner, line)
+        return True
+    return True
+
+
+def _unguarded_call_site() -> str | None:
+    """``file:line`` of the main script's top-level statement that leads to this call when a bench worker would
+    run it again (it is not under ``if __name__ == "__main__":``), else None (also when that cannot be told: no
+    script file, as in an interactive session, or a call from another thread)."""
+    import ast
+
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if not path:
+        return None
+    site = None
+    f = sys._getframe(1)
+    while f is not None:
+        if f.f_globals is main.__dict__ and f.f_code.co_name == "<module>":
+            site = f
+        f = f.f_back
+    if site is None or os.path.realpath(site.f_code.co_filename) != os.path.realpath(path):
+        return None
+    try:
+        tree = ast.parse(Path(path).read_bytes(), path)
+    except (OSError, SyntaxError, ValueError):
+        return None
+    line = site.f_lineno
+    return f"{path}:{line}" if _runs_in_workers(tree.body, line) else None
 
 
 def run_bench(out: str | Path, *, progress: bool | None = False, report_only: bool = False, **kwargs):
     """Run (or resume) a bench into ``out`` and return its :class:`bigcbf.bench.runner.BenchOutcome` (counts, wall
-    time, and ``summary``: the content of summary.json). ``kwargs``: as for :func:`bench_config`."""
+    time, and ``summary``: the content of summary.json). ``kwargs``: as for :func:`bench_config`.
+
+    A script calls it under ``if __name__ == "__main__":``: the local engine's workers are fresh Python processes
+    that import the script, and a call at its top level is a UserError before any work. A bench whose every
+    episode failed raises a UserError naming the first error (after writing its outputs); with some failed, the
+    outcome counts them (``errors``; the command line exits with status 1 in both cases)."""
+    import inspect
+
     from .bench.runner import run_bench as _run
 
-    return _run(bench_config(out, **kwargs), progress=progress, report_only=report_only)
+    if _called_from_reimported_main():     # a bench worker importing the script: it must not run a bench itself
+        raise UserError(UNGUARDED_MESSAGE)
+    known = [p for p in inspect.signature(bench_config).parameters if p != "out"]
+    for k in kwargs:
+        if k not in known:
+            raise UserError(f"unknown argument; run_bench takes out, progress, report_only, {', '.join(known)}",
+                            field=k)
+    if progress is not None and not isinstance(progress, bool):
+        raise UserError(f"expected True, False or None, got {progress!r}"[:160], field="progress")
+    if not isinstance(report_only, bool):
+        raise UserError(f"expected True or False, got {report_only!r}"[:160], field="report_only")
+    if kwargs.get("engine", "local") == "local" and not report_only:     # (before a suite writes its files)
+        site = _unguarded_call_site()
+        if site is not None:
+            raise UserError(f"run_bench is called at the top level of {site}: {UNGUARDED_MESSAGE}")
+    config = bench_config(out, **kwargs)
+    outcome = _run(config, progress=progress, report_only=report_only)
+    if outcome.total and outcome.errors == outcome.total:
+        first = (outcome.summary.get("error_episodes") or [{}])[0]
+        where = f"{first.get('scenario')} / {first.get('method')} / seed {first.get('seed')}"
+        what = str(first.get("error") or "").splitlines()[0] if first.get("error") else "unknown error"
+        raise UserError(f"every one of the bench's {outcome.total} episodes failed (recorded in {config.out}); the "
+                        f"first: {where}: {what}")
+    return outcome
 
 
 def scenarios() -> dict[str, Path]:

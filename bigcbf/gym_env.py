@@ -45,7 +45,7 @@ whole number in [0, 4294967295], the range of ``bigcbf run --seed``.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -76,32 +76,17 @@ class RewardWeights:
 
 
 def check_seed(seed) -> int:
-    """A seed as ``bigcbf run --seed`` takes it (``cli.argtypes.nonneg_int``: a whole number in [0, MAX_SEED]),
-    else a UserError naming ``seed``."""
-    import argparse
-
-    from .cli.argtypes import nonneg_int
-
-    whole = isinstance(seed, (numbers.Integral, np.integer)) and not isinstance(seed, (bool, np.bool_))
-    try:                                   # repr of a non-integer (1.5, '3') is never a whole number to int()
-        return nonneg_int(str(int(seed)) if whole else repr(seed))
-    except argparse.ArgumentTypeError as exc:
-        raise UserError(str(exc), field="seed") from None
+    """A seed as ``bigcbf run --seed`` takes it (a whole number in [0, MAX_SEED]), else a UserError naming ``seed``
+    (:func:`bigcbf.validate.check_seed`, the API's check)."""
+    from .validate import check_seed as _check
+    return _check(seed, "seed")
 
 
 def check_time_limit(scenario, time_limit_s) -> float:
-    """An episode's time limit checked as a scenario file's ``time_limit_s`` is (the file loader's number check, then
-    ``Scenario``'s: in (0, 600] s), else a UserError naming ``time_limit_s``."""
-    from .errors import FieldError
-    from .params.toml_io import _convert
-
-    if isinstance(time_limit_s, (np.integer, np.floating)):
-        time_limit_s = time_limit_s.item()
-    v = _convert(float, time_limit_s, None, "time_limit_s")     # a finite number, as from_dict converts the file's
-    try:
-        return replace(scenario, time_limit_s=v).time_limit_s
-    except FieldError as exc:
-        raise UserError(str(exc), field=exc.field) from None
+    """An episode's time limit checked as a scenario file's ``time_limit_s`` is (in (0, 600] s), else a UserError
+    naming ``time_limit_s`` (:func:`bigcbf.validate.check_time_limit`, the API's check)."""
+    from .validate import check_time_limit as _check
+    return _check(time_limit_s, scenario)
 
 
 class NavigationEnv(gym.Env):
