@@ -105,8 +105,8 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
     if perception not in PERCEPTION_MODES:
         raise UserError(f"perception must be one of {', '.join(PERCEPTION_MODES)}, got {perception!r}"[:160])
     check_choice(camera, CAMERAS, "camera")
-    video = check_path(video, "video", "a video file path")
-    log = check_path(log, "log", "a log file path")
+    check_path(video, "video", "a video file path")
+    check_path(log, "log", "a log file path")
     if isinstance(observers, (str, bytes)) or not isinstance(observers, Iterable):
         raise UserError(f"expected a list of functions, got {type(observers).__name__}", field="observers")
     observers = list(observers)
