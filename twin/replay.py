@@ -547,16 +547,103 @@ def fit_profile(data: LogData, start: RobotProfile, opt: ReplayOptions, scene, p
     return run_profile("fitted", data, profile_of(res.x), opt.window_s, scene=scene, period_s=period_s)
 
 
-def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | Path, opt: ReplayOptions, scene) -> None:
-    """Top view of the replayed model: the logged path (green), the replayed path (cyan) and the nominal model's
-    (orange). The paths are drawn on the image (the top camera is orthographic: a metre is H / fovy pixels)."""
+#: The video's colours (RGB) per path, and the robot marker's size: the simulated robot's bumper, 0.30 x 0.20 m.
+PATH_RGB = {"logged": (60, 220, 80), "nominal": (255, 140, 25), "model": (25, 230, 230)}
+ROBOT_SIZE_M = (0.30, 0.20)
+
+
+def scale_bar_length(max_m: float) -> float:
+    """The longest 1, 2 or 5 x 10^k metres not above ``max_m``."""
+    k = np.floor(np.log10(max_m))
+    for m in (5, 2, 1):
+        if m * 10 ** k <= max_m:
+            return float(m * 10 ** k)
+    return float(10 ** k)
+
+
+def draw_scale_bar(img: np.ndarray, px_per_m: float) -> float:
+    """A scale bar in the bottom-left corner (at most a quarter of the width); returns its length [m]."""
     import cv2
+    h, w = img.shape[:2]
+    length = scale_bar_length(0.25 * w / px_per_m)
+    n = int(round(length * px_per_m))
+    x0, y0 = 14, h - 16
+    label = f"{length:g} m"
+    (tw, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+    cv2.rectangle(img, (x0 - 6, y0 - th - 16), (x0 + max(n, tw) + 6, y0 + 8), (20, 20, 20), -1)
+    cv2.line(img, (x0, y0), (x0 + n, y0), (255, 255, 255), 3)
+    for x in (x0, x0 + n):
+        cv2.line(img, (x, y0 - 6), (x, y0 + 4), (255, 255, 255), 2)
+    cv2.putText(img, label, (x0, y0 - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return length
+
+
+def draw_robot(img: np.ndarray, uv, theta: float, px_per_m: float, rgb, filled: bool = False) -> None:
+    """The robot's pose marker: its footprint (ROBOT_SIZE_M, at least 16 x 11 px) in ``rgb`` over a dark edge
+    (``filled``: a translucent fill, so outlines drawn over it stay visible), and a heading arrow from its front
+    edge outwards (image v points down, so a heading theta points at (cos, -sin))."""
+    import cv2
+    L = max(ROBOT_SIZE_M[0] * px_per_m, 16.0) / 2
+    W = max(ROBOT_SIZE_M[1] * px_per_m, 11.0) / 2
+    c, s = np.cos(theta), -np.sin(theta)
+    fwd, left = np.array([c, s]), np.array([s, -c])
+    u = np.asarray(uv, float)
+    box = np.array([u + fwd * L + left * W, u - fwd * L + left * W, u - fwd * L - left * W, u + fwd * L - left * W])
+    pts = box.round().astype(np.int32).reshape(-1, 1, 2)
+    if filled:
+        layer = img.copy()
+        cv2.fillPoly(layer, [pts], tuple(rgb), cv2.LINE_AA)
+        cv2.addWeighted(layer, 0.55, img, 0.45, 0, dst=img)
+    a0 = tuple((u + fwd * L).round().astype(int))
+    a1 = tuple((u + fwd * (L + 16)).round().astype(int))
+    for col, th in (((15, 15, 15), 5), (tuple(rgb), 2)):
+        cv2.polylines(img, [pts], True, col, th, cv2.LINE_AA)
+        cv2.arrowedLine(img, a0, a1, col, th, cv2.LINE_AA, tipLength=0.45)
+
+
+def overlay(img: np.ndarray, to_px, px_per_m: float, paths: list[tuple[str, np.ndarray, np.ndarray]],
+            route: np.ndarray | None = None) -> None:
+    """Draw on a top-view frame: the whole logged route (thin, dark), then per path (name in PATH_RGB, its poses
+    so far (N, 3)) its trail and the robot's current pose marker, then the scale bar."""
+    import cv2
+    if route is not None and len(route) > 1:
+        cv2.polylines(img, [to_px(route[:, :2])], False, (30, 110, 40), 1, cv2.LINE_AA)
+    for name, poses in paths:
+        if len(poses) > 1:
+            cv2.polylines(img, [to_px(poses[:, :2])], False, PATH_RGB[name], 3 if name == "logged" else 2,
+                          cv2.LINE_AA)
+    for name, poses in paths:
+        if len(poses):
+            draw_robot(img, to_px(poses[-1, :2])[0], float(poses[-1, 2]), px_per_m, PATH_RGB[name],
+                       filled=name == "logged")
+    draw_scale_bar(img, px_per_m)
+
+
+def legend_items(model_name: str) -> list[tuple[str, tuple, str]]:
+    """The legend under the video: each path's colour, the markers (box: the robot's odometry pose now, arrow: its
+    heading), the thin whole logged path, and the rendered robot (the simulated body: its true pose, from which its
+    wheel odometry drifts by roller slip)."""
+    rgba = lambda name: tuple(c / 255 for c in PATH_RGB[name]) + (1.0,)       # noqa: E731
+    return [("logged (odometry)", rgba("logged"), "thick"), (f"{model_name} model", rgba("model"), "thick"),
+            ("nominal model", rgba("nominal"), "thick"),
+            ("box, arrow: pose now (odometry; logged filled)", (0.85, 0.85, 0.85, 1.0), "arrow"),
+            ("thin: whole logged path", (30 / 255, 110 / 255, 40 / 255, 1.0), "line"),
+            (f"3D robot: the {model_name} model's true pose", (0.6, 0.6, 0.6, 1.0), "disc")]
+
+
+def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | Path, opt: ReplayOptions, scene) -> None:
+    """Top view of the replayed model: for the logged odometry (green), the replayed model (cyan) and the nominal
+    model (orange) the path so far and the robot's current pose (its footprint and heading), the whole logged path
+    thin, a scale bar in metres, the time, and a legend band below naming each colour. The paths are drawn on the
+    image (the top camera is orthographic: a metre is H / fovy pixels)."""
     import mujoco
 
-    from bigcbf.sim.render import Renderer, VideoWriter, put_text
+    from bigcbf.sim.render import Renderer, VideoWriter, put_text, with_legend_strip
 
     W, H = 640, 480
     state: dict = {}
+    legend = legend_items(run.name)
+    t_total = float(data.odom.t[-1] - data.cmd.t[0])
 
     def to_px(xy, cam, scale):
         xy = np.asarray(xy, float).reshape(-1, 2)
@@ -571,17 +658,17 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
             state["scale"] = H / float(world.model.cam_fovy[cid])
         cam, scale = state["cam"], state["scale"]
         img = np.ascontiguousarray(state["r"].render(world.data, "top"))
-        k = int(np.searchsorted(run.t, t_log))
-        lk = min(int(np.searchsorted(data.odom.t, t_log)), len(data.odom.t) - 1)
-        for xy, rgb, width in ((data.odom.pose[:, :2], (60, 220, 80), 3), (nominal.pose[:k, :2], (255, 140, 25), 2),
-                               (run.pose[:k, :2], (25, 230, 230), 2)):
-            if len(xy) > 1:
-                cv2.polylines(img, [to_px(xy, cam, scale)], False, rgb, width, cv2.LINE_AA)
-        put_text(img, [f"t = {t_log - data.cmd.t[0]:6.2f} s   replay of {Path(data.path).name}",
-                       f"green: logged   cyan: {run.name} model   orange: nominal model",
-                       f"logged twist ({data.odom.twist[lk, 0]:+.2f}, {data.odom.twist[lk, 1]:+.2f}, "
-                       f"{data.odom.twist[lk, 2]:+.2f})"])
-        state["w"].write(img)
+        k = int(np.searchsorted(run.t, t_log, side="right"))
+        lk = int(np.searchsorted(data.odom.t, t_log, side="right"))
+        k0 = max(int(np.searchsorted(data.odom.t, data.cmd.t[0], side="right")) - 1, 0)
+        logged = data.odom.pose[k0:max(lk, k0 + 1)]
+        start = data.odom.pose[k0:k0 + 1]            # both models start at the logged pose at the first command
+        paths = [("logged", logged), ("nominal", nominal.pose[:k] if k else start), ("model", run.pose[:k] if k else start)]
+        overlay(img, lambda xy: to_px(xy, cam, scale), scale, paths, route=data.odom.pose)
+        tw = data.odom.twist[min(max(lk - 1, 0), len(data.odom.t) - 1)]
+        put_text(img, [f"t = {t_log - data.cmd.t[0]:6.2f} s of {t_total:.1f} s   replay of {Path(data.path).name}",
+                       f"logged twist ({tw[0]:+.2f} m/s, {tw[1]:+.2f} m/s, {tw[2]:+.2f} rad/s)"], scale=0.5)
+        state["w"].write(with_legend_strip(img, legend))
 
     state["w"] = VideoWriter(path, fps=opt.video_fps)
     try:
