@@ -1,18 +1,25 @@
-"""Plots of a calibration that a person reads (``bigcbf calibrate LOG --report DIR``).
+"""Plots of a calibration that a person reads (``bigcbf calibrate LOG --report DIR``), and an index page.
 
-Every figure has a panel per axis (vx, vy, wz); an axis the log does not identify, or a panel with nothing to
-show, says so in the panel instead of staying blank.
+Only the axes the log identifies get panels; an axis it does not identify (a differential robot's vy), or a panel
+with nothing to show (no clean command steps, no scans, no execution model), is left out and said in one line
+under the figure and on the index page (e.g. "vy: not identified (no lateral command)"). No figure has an empty
+panel.
 
-- ``command_response.png``: per axis, the command (as sent, and delayed by the dead time) against the measured
-  velocity, Eq. (1) (A u + d) and the saturating model (limits, dead time, lag), over a 20-s excerpt with the
-  most command activity; saturated samples marked;
-- ``delay.png``: per axis, the change-correlation curve with its peak, its bootstrap interval and a near tie
-  marked; the per-edge delay histogram; the perception latency histogram, with tau95 marked;
+- ``index.md``: what the calibration found (tau95, A and d, e_exec, e_ZOH, with units, and where each enters the
+  paper's ``eq:uncertainty_margin`` and ``eq:execution``), in plain words, the figures with what each shows, what
+  was left out, and calibrate's notes;
+- ``command_response.png``: per identified axis, the command (as sent, and delayed by the dead time) against the
+  measured velocity, Eq. (1) (A u + d) and the saturating model (limits, dead time, lag), over a 20-s excerpt with
+  the most command activity; saturated samples marked;
+- ``delay.png``: per identified axis, the change-correlation curve with its peak, its bootstrap interval and a
+  near tie marked, and (where the log has clean command steps) the per-edge delay histogram; the perception latency
+  histogram and the actuation delays behind tau95 (where there are any), with tau95 marked;
 - ``residuals.png``: ||r_xy|| against the command speed ||u_xy|| with the bound behind e_exec(u) and its stated and
-  measured coverage, and per axis the residual r_j against the command u_j with the per-axis 95 % bound; samples
-  in the bound (settled, unsaturated) in colour, transients in grey, saturated samples in red;
-- ``limits.png``: the fastest wheel's rim speed measured against what Eq. (1) asks for (max|R (A u + d)|), with
-  the identified rim-speed limit: below it the points follow the diagonal, above it they stay at the limit;
+  measured coverage, and per identified axis the residual r_j against the command u_j with the per-axis 95 % bound;
+  samples in the bound (settled, unsaturated) in colour, transients in grey, saturated samples in red;
+- ``limits.png`` (with an execution model): the fastest wheel's rim speed measured against what Eq. (1) asks for
+  (max|R (A u + d)|), with the identified rim-speed limit: below it the points follow the diagonal, above it they
+  stay at the limit;
 - ``calibration.json``: the numbers (as ``--json``).
 """
 from __future__ import annotations
@@ -39,11 +46,39 @@ def _busiest_window(t: np.ndarray, u: np.ndarray, length: float) -> tuple[float,
     return a, a + length
 
 
-def _save(fig, path: Path) -> Path:
-    """Lay out, write (110 dpi) and close a figure; returns its path."""
+#: What each axis's command is called in a "not identified" line.
+COMMAND_NAME = ("forward", "lateral", "turning")
+
+
+def not_identified_lines(cal: Calibration, cmd_u: np.ndarray | None = None) -> list[str]:
+    """One line per axis the log does not identify, e.g. "vy: not identified (no lateral command)"; with the
+    commands, an axis that is commanded but too little says how much (the rule of twin.execution)."""
+    from .execution import ExecutionOptions
+    lim = ExecutionOptions().excite_min
+    out = []
+    for j in np.flatnonzero(~np.asarray(cal.fit.identified, bool)):
+        if cmd_u is None or not np.any(np.abs(cmd_u[:, j]) > 1e-9):
+            why = f"no {COMMAND_NAME[j]} command"
+        else:
+            why = (f"too little {COMMAND_NAME[j]} command: std {np.std(cmd_u[:, j]):.3g} {UNITS[j]}, "
+                   f"identification needs {lim[j]:g}")
+        out.append(f"{AXES[j]}: not identified ({why})")
+    return out
+
+
+def _footer(fig, lines: list[str]) -> None:
+    """Lines under a figure's panels (what was left out, and why)."""
+    if lines:
+        fig.text(0.01, 0.005, "\n".join(lines), ha="left", va="bottom", fontsize=8, color="0.25")
+
+
+def _save(fig, path: Path, footer: list[str] = ()) -> Path:
+    """Lay out (room for the footer), write (110 dpi) and close a figure; returns its path."""
     import matplotlib.pyplot as plt
     from bigcbf.outputs import atomic_output
-    fig.tight_layout()
+    _footer(fig, list(footer))
+    bottom = (len(footer) * 8 * 1.35 / 72 + 0.12) / fig.get_figheight() if footer else 0.0   # 8-pt lines [in]
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     try:
         with atomic_output(path, "figure") as tmp:
             fig.savefig(tmp, dpi=110)
@@ -52,39 +87,42 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _empty(ax, text: str) -> None:
-    """A panel with nothing to draw says why."""
-    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, fontsize=9, color="0.35", wrap=True)
-    ax.tick_params(left=False, labelleft=False, bottom=False, labelbottom=False)
+def _grid(plt, n: int, width: float = 14.0, row_h: float = 3.4, max_cols: int = 3):
+    """A figure with exactly n panels (rows of up to max_cols; the last row's unused cells removed)."""
+    cols = min(n, max_cols)
+    rows = -(-n // cols)
+    fig, axs = plt.subplots(rows, cols, figsize=(width, row_h * rows + 1.0), squeeze=False)
+    flat = list(axs.ravel())
+    for ax in flat[n:]:
+        fig.delaxes(ax)
+    return fig, flat[:n]
 
 
-def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None = None,
-                 cmd_u: np.ndarray | None = None) -> list[Path]:
-    """Write the plots and calibration.json into ``out_dir`` (created). Returns the files written."""
+def figures(cal: Calibration, cmd_t: np.ndarray | None = None,
+            cmd_u: np.ndarray | None = None) -> tuple[dict, list[str]]:
+    """The report's figures, ({file name: (matplotlib figure, footer lines)}, what was left out and why): a panel
+    per identified axis and per thing to show, never an empty one; a figure with nothing to show is left out."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bigcbf.outputs import check_output_dir, strict_json, write_text
-    out = check_output_dir(out_dir, "report folder")
-    files = []
+    figs: dict = {}
+    left_out: list[str] = []
     a = cal.aligned
     t, u, v = a["t"], a["u"], a["v"]
     sat, use, scored = a["saturated"], a["used"], a.get("scored", np.ones(len(t), bool))
-    ident = cal.fit.identified
+    ident = np.asarray(cal.fit.identified, bool)
+    axes_ids = [int(j) for j in np.flatnonzero(ident)]
+    not_ident = not_identified_lines(cal, cmd_u)
     model = cal.model
     lat = cal.latency_s
-    not_ident = "{} is not identified: the log does not excite it"
 
-    # 1. command vs response
+    # 1. command vs response: one panel per identified axis
     t_a, t_b = _busiest_window(t, u, 20.0)
     sel = (t >= t_a) & (t <= t_b)
-    fig, axs = plt.subplots(3, 1, figsize=(13, 8.4))
+    fig, axs = plt.subplots(len(axes_ids), 1, figsize=(13, 2.8 * len(axes_ids) + 1.2), squeeze=False)
     lin = cal.fit.predict(u)
-    for j, ax in enumerate(axs):
-        if not ident[j]:
-            _empty(ax, not_ident.format(AXES[j]))
-            continue
+    for ax, j in zip(axs[:, 0], axes_ids):
         if cmd_t is not None:
             tt = np.linspace(t_a, t_b, 2000)
             ax.step(tt - t[0], zoh(cmd_t, cmd_u[:, j], tt), where="post", color="0.6", lw=1, label="command as sent")
@@ -106,76 +144,91 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
         ax.grid(alpha=0.3)
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7)
     fig.suptitle("Command and response (the 20 s with the most command activity)")
-    files.append(_save(fig, out / "command_response.png"))
+    figs["command_response.png"] = (fig, not_ident)
 
-    # 2. delays
+    # 2. delays: a panel per thing to show
     d = cal.delay
-    fig, axs = plt.subplots(3, 3, figsize=(14, 8.4))
-    for j in range(3):
-        ax = axs[j, 0]
+    panels, missing = [], []
+    for j in axes_ids:
         ad = d.axes.get(j)
-        if not ident[j] or ad is None:
-            _empty(ax, not_ident.format(AXES[j]) if not ident[j] else f"no changes of {AXES[j]} to correlate")
-        else:
+        if ad is None:
+            missing.append(f"{AXES[j]}: no command changes to correlate (no correlation curve)")
+            continue
+
+        def corr(ax, j=j, ad=ad):
             curve = ad.curve if ad.curve is not None else d.xcorr_curve
             ax.plot(d.xcorr_lags_s[:len(curve)] * 1e3, curve, color="tab:blue", lw=1)
             ax.axvline(ad.delay_s * 1e3, color="tab:red", ls="--", label=f"peak {ad.delay_s * 1e3:.0f} ms")
             ax.axvspan(ad.ci_s[0] * 1e3, ad.ci_s[1] * 1e3, color="tab:red", alpha=0.12,
                        label=f"bootstrap 90 %: {ad.ci_s[0] * 1e3:.0f}-{ad.ci_s[1] * 1e3:.0f} ms")
             if ad.tie:
-                ax.axvline(ad.runner_up_s * 1e3, color="tab:orange", ls=":", label=f"near tie {ad.runner_up_s * 1e3:.0f} ms")
+                ax.axvline(ad.runner_up_s * 1e3, color="tab:orange", ls=":",
+                           label=f"near tie {ad.runner_up_s * 1e3:.0f} ms")
             if np.isfinite(lat[j]):
                 ax.axvline(lat[j] * 1e3, color="tab:purple", ls="-.", label=f"latency {lat[j] * 1e3:.0f} ms")
-            ax.set_ylabel(f"{AXES[j]}: correlation of changes")
+            ax.set_title(f"{AXES[j]}: correlation of command and response changes", fontsize=9)
+            ax.set_xlabel("lag [ms]")
+            ax.set_ylabel("correlation")
             ax.legend(fontsize=7)
-        ax = axs[j, 1]
+        panels.append(corr)
+    for j in axes_ids:
         edges = d.edge_delays_s[d.edge_axes == j] if len(d.edge_delays_s) else np.zeros(0)
-        if not ident[j]:
-            _empty(ax, not_ident.format(AXES[j]))
-        elif len(edges) == 0:
-            _empty(ax, f"no clean command steps on {AXES[j]}\n(a step held 0.35 s before and after)")
-        else:
+        if len(edges) == 0:
+            missing.append(f"{AXES[j]}: no clean command steps (a step held 0.35 s before and after), so no "
+                           "per-edge delay histogram")
+            continue
+
+        def hist(ax, j=j, edges=edges):
             ax.hist(edges * 1e3, bins=min(30, max(5, len(edges) // 2)), color="tab:blue", alpha=0.8)
-            ax.axvline(np.median(edges) * 1e3, color="tab:red", ls="--", label=f"median {np.median(edges) * 1e3:.0f} ms")
-            ax.set_ylabel(f"{AXES[j]}: edges ({len(edges)})")
+            ax.axvline(np.median(edges) * 1e3, color="tab:red", ls="--",
+                       label=f"median {np.median(edges) * 1e3:.0f} ms")
+            ax.set_title(f"{AXES[j]}: per-edge half-way delays ({len(edges)} edges)", fontsize=9)
+            ax.set_xlabel("delay [ms]")
+            ax.set_ylabel("edges")
             ax.legend(fontsize=7)
-    for ax in axs[:, 0]:
-        ax.set_xlabel("lag [ms]")
-    for ax in axs[:, 1]:
-        ax.set_xlabel("per-edge half-way delay [ms]")
-    ax = axs[0, 2]
+        panels.append(hist)
     if len(d.perception_latency_s):
-        ax.hist(d.perception_latency_s * 1e3, bins=30, color="tab:purple", alpha=0.8)
-        ax.axvline(d.perception95_s * 1e3, color="tab:red", ls="--", label=f"p95 {d.perception95_s * 1e3:.0f} ms")
-        ax.set_xlabel(f"perception latency [ms] ({d.perception_source})")
-        ax.legend(fontsize=7)
+        def perception(ax):
+            ax.hist(d.perception_latency_s * 1e3, bins=30, color="tab:purple", alpha=0.8)
+            ax.axvline(d.perception95_s * 1e3, color="tab:red", ls="--", label=f"p95 {d.perception95_s * 1e3:.0f} ms")
+            ax.set_title(f"perception latency of the scans ({d.perception_source})", fontsize=9)
+            ax.set_xlabel("perception latency [ms]")
+            ax.set_ylabel("scans")
+            ax.legend(fontsize=7)
+        panels.append(perception)
     else:
-        _empty(ax, "no scans: no perception latency\n(tau95 holds the actuation delay only)")
-    ax = axs[1, 2]
+        missing.append("no scans: no perception latency (tau95 holds the actuation delay only)")
     act = d.edge_delays_s[np.isin(d.edge_axes, d.tau95_axes)] if len(d.edge_delays_s) else np.zeros(0)
     if len(act):
-        ax.hist(act * 1e3, bins=30, color="tab:blue", alpha=0.8)
-        ax.axvline(d.actuation95_s * 1e3, color="tab:red", ls="--", label=f"actuation p95 {d.actuation95_s * 1e3:.0f} ms")
-        ax.axvline(d.tau95_s * 1e3, color="k", ls="-", label=f"tau95 {d.tau95_s * 1e3:.0f} ms (with perception)")
-        ax.set_xlabel(f"actuation delays of tau95 ({', '.join(AXES[j] for j in d.tau95_axes)}) [ms]")
-        ax.legend(fontsize=7)
+        def actuation(ax):
+            ax.hist(act * 1e3, bins=30, color="tab:blue", alpha=0.8)
+            ax.axvline(d.actuation95_s * 1e3, color="tab:red", ls="--",
+                       label=f"actuation p95 {d.actuation95_s * 1e3:.0f} ms")
+            ax.axvline(d.tau95_s * 1e3, color="k", ls="-", label=f"tau95 {d.tau95_s * 1e3:.0f} ms (with perception)")
+            ax.set_xlim(right=max(ax.get_xlim()[1], d.tau95_s * 1e3 * 1.05))       # tau95 inside, not on the edge
+            ax.set_title(f"actuation delays behind tau95 ({', '.join(AXES[j] for j in d.tau95_axes)})", fontsize=9)
+            ax.set_xlabel("delay [ms]")
+            ax.legend(fontsize=7)
+        panels.append(actuation)
     else:
-        _empty(ax, f"no clean edges: tau95 = {d.tau95_s * 1e3:.0f} ms from the\ncross-correlation delay"
-               + (" and the perception latency" if len(d.perception_latency_s) else ""))
-    p = cal.tau95_parts()
-    _empty(axs[2, 2], f"tau95 {d.tau95_s * 1e3:.0f} ms = 95 % of actuation + perception\n"
-           f"latency {p.latency_s * 1e3:.0f} ms, half-way median {p.actuation_median_s * 1e3:.0f} ms,\n"
-           f"actuation p95 {p.actuation95_s * 1e3:.0f} ms, perception p95 {p.perception95_s * 1e3:.0f} ms")
-    fig.suptitle("Delays per axis")
-    files.append(_save(fig, out / "delay.png"))
+        missing.append(f"no clean command steps on any axis: tau95's actuation part is the cross-correlation delay "
+                       f"({d.xcorr_s * 1e3:.0f} ms)")
+    pt = cal.tau95_parts()
+    fig, axs = _grid(plt, len(panels))
+    for draw, ax in zip(panels, axs):
+        draw(ax)
+    fig.suptitle(f"Delays: tau95 = {d.tau95_s * 1e3:.0f} ms (95 % of actuation + perception; latency "
+                 f"{pt.latency_s * 1e3:.0f} ms, actuation p95 {pt.actuation95_s * 1e3:.0f} ms, perception p95 "
+                 f"{pt.perception95_s * 1e3:.0f} ms)", fontsize=11)
+    figs["delay.png"] = (fig, not_ident + missing)
 
-    # 3. residuals against the bound
+    # 3. residuals against the bound: the speed panel, then one per identified axis
     b = cal.bound
     held = a["held"]
     r = a.get("r", v - lin)
     other = ~use & ~sat
     fig = plt.figure(figsize=(13, 8))
-    gs = fig.add_gridspec(2, 3)
+    gs = fig.add_gridspec(2, len(axes_ids))
     ax = fig.add_subplot(gs[0, :])
     ax.scatter(a["speed"][other], a["resid"][other], s=3, alpha=0.25, color="0.6",
                label="transients (response not settled): not in the bound")
@@ -197,11 +250,8 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
     ax.set_title(f"Execution residual; e_exec(u) = {cal.residual_horizon_s:.3f} s x bound")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
-    for j in range(3):
-        ax = fig.add_subplot(gs[1, j])
-        if not ident[j]:
-            _empty(ax, not_ident.format(AXES[j]))
-            continue
+    for col, j in enumerate(axes_ids):
+        ax = fig.add_subplot(gs[1, col])
         ax.scatter(u[other, j], r[other, j], s=3, alpha=0.2, color="0.6")
         if sat.any():
             ax.scatter(u[sat, j], r[sat, j], s=3, alpha=0.4, color="tab:red")
@@ -216,13 +266,13 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
         ax.set_xlabel(f"command {AXES[j]} [{UNITS[j]}]")
         ax.set_ylabel(f"residual r_{AXES[j]} [{UNITS[j]}]")
         ax.grid(alpha=0.3)
-    files.append(_save(fig, out / "residuals.png"))
+    figs["residuals.png"] = (fig, not_ident)
 
-    # 4. the wheel limit
-    fig, ax = plt.subplots(figsize=(7, 5.5))
-    if model is None or not ident.any():
-        _empty(ax, "no execution model")
+    # 4. the wheel limit (only with an execution model)
+    if model is None:
+        left_out.append("limits.png: no execution model (the wheel limits were not identified)")
     else:
+        fig, ax = plt.subplots(figsize=(7, 5.5))
         st = model.static
         dem = rim_demand(u @ st.A.T + st.d, st.lever_m)
         meas = rim_demand(v, st.lever_m)
@@ -246,8 +296,85 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper left")
-    files.append(_save(fig, out / "limits.png"))
+        figs["limits.png"] = (fig, [])
+    return figs, left_out + missing
 
+
+def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None = None,
+                 cmd_u: np.ndarray | None = None) -> list[Path]:
+    """Write the plots, calibration.json and index.md into ``out_dir`` (created). Returns the files written."""
+    from bigcbf.outputs import check_output_dir, strict_json, write_text
+    out = check_output_dir(out_dir, "report folder")
+    figs, left_out = figures(cal, cmd_t, cmd_u)
+    files = [_save(fig, out / name, footer) for name, (fig, footer) in figs.items()]
     files.append(out / "calibration.json")
     write_text(files[-1], strict_json(cal.to_json(), indent=2), "calibration.json")
+    files.append(out / "index.md")
+    write_text(files[-1], index_page(cal, [p.name for p in files[:-1]], not_identified_lines(cal, cmd_u), left_out),
+               "report index")
     return files
+
+
+def index_page(cal: Calibration, files: list[str], not_ident: list[str], left_out: list[str]) -> str:
+    """The report's index (Markdown): what the calibration found and what the terms mean, the figures, what was
+    left out, calibrate's notes."""
+    d, f, b = cal.delay, cal.fit, cal.bound
+    pt = cal.tau95_parts()
+    ident = [AXES[j] for j in range(3) if f.identified[j]]
+    knots = ", ".join(f"{s:.2f} m/s -> {x:.4f} m/s" for s, x in zip(b.speed_knots, b.bound_knots))
+    e_exec = [cal.residual_horizon_s * float(x) for x in (b.bound_knots.min(), b.bound_knots.max())]
+    mat = lambda row: "[" + ", ".join(f"{x:+.3f}" for x in row) + "]"      # noqa: E731
+    lines = [f"# Calibration report: {Path(cal.log).name}", "",
+             f"Log `{cal.log}`: {cal.duration_s:.1f} s aligned; commands `{cal.topics['commands']}` "
+             f"({cal.publication}), odometry `{cal.topics['odometry']}`, scans `{cal.topics['scans']}`. "
+             f"Identified axes: {', '.join(ident)}." + (" " + "; ".join(not_ident) + "." if not_ident else ""),
+             "", "## What the calibration found", "",
+             "These are the robot-dependent terms of the paper's shared uncertainty radius, `eq:uncertainty_margin` "
+             "(Eq. (15) in this project's numbering, see `bigcbf/control/__init__.py`):",
+             "m_i = ||R(theta)(A u + d) - v_i|| tau95 + beta sqrt(lambda_max(Sigma_i)) + e_exec(u) + e_ZOH, "
+             "the distance [m] by which the robot's and an obstacle's relative position may be off. "
+             "`bigcbf run --profile` reads them from the profile `calibrate --out` writes.", "",
+             "| term | value | unit | what it is |", "|---|---|---|---|",
+             f"| tau95 | {d.tau95_s:.3f} | s | the perception-to-actuation delay: the 95th percentile of (actuation "
+             f"delay + perception latency). In `eq:uncertainty_margin` it multiplies the relative speed: the distance "
+             f"the robot and an obstacle close while a scan becomes a wheel motion. Here: command-to-wheel latency "
+             f"{pt.latency_s:.3f} s, actuation p95 {pt.actuation95_s:.3f} s, perception p95 {pt.perception95_s:.3f} s "
+             f"({d.perception_source}). |",
+             f"| A | {' '.join(mat(f.A[j]) for j in range(3))} | - (rows vx, vy, wz) | the gain of the execution "
+             "model `eq:execution` (Eq. (1)), v_real = R(theta)(A u + d + r): what the robot realises of a "
+             "command u; A = I is a perfect robot. An axis not identified keeps its identity row. |",
+             f"| d | {mat(f.d)} | m/s, m/s, rad/s | the constant bias of `eq:execution`: motion the robot adds to "
+             "every command. |",
+             f"| e_exec(u) | {e_exec[0]:.4f} to {e_exec[1]:.4f} | m | the displacement the execution residual r of "
+             f"`eq:execution` can cause (the robot-execution term of `eq:uncertainty_margin`): horizon "
+             f"{cal.residual_horizon_s:.3f} s (T_C + tau95) x the bound on ||r_xy|| at the command speed ||u_xy|| "
+             f"({knots}); the bound covers {b.coverage:.2f} of the residuals by construction and "
+             f"{b.coverage_heldout:.3f} of the held-out ones. |",
+             f"| e_ZOH | {cal.e_zoh_m:.4f} | m | the distance the robot covers while one command is held between "
+             f"control updates (zero-order hold; the sampled-data term of `eq:uncertainty_margin`): T_C "
+             f"{cal.control_period_s:.3f} s x v {cal.speed_mps:.3f} m/s (the 99th percentile of the measured "
+             "speed). |"]
+    if cal.model is not None:
+        st, dyn = cal.model.static, cal.model.dynamic
+        lines += ["", "Wheel limits (not in the paper's model; the twin's saturating model): "
+                  + (f"rim speed {st.v_max:.3f} m/s" if st.v_max is not None else "no wheel-speed limit reached")
+                  + "; " + (f"acceleration {dyn.accel_max:.2f} m/s^2" if dyn.accel_max is not None
+                            else "no acceleration limit seen") + "."]
+    desc = {"command_response.png": "the command (as sent and delayed by the dead time) against the measured "
+                                    "velocity, Eq. (1) and the saturating model, per identified axis, over the 20 s "
+                                    "with the most command activity",
+            "delay.png": "how the delays were measured: per identified axis the correlation of command and response "
+                         "changes (its peak is the delay), the per-edge delays where the log has clean command "
+                         "steps, and the perception latency and actuation delays behind tau95",
+            "residuals.png": "the execution residual ||r_xy|| against the command speed with the bound behind "
+                             "e_exec, and per identified axis the residual against its command",
+            "limits.png": "the fastest wheel's rim speed measured against what Eq. (1) asks, with the identified "
+                          "rim-speed limit",
+            "calibration.json": "every number (as `bigcbf calibrate --json`)"}
+    lines += ["", "## Files", ""] + [f"- [{name}]({name}): {desc.get(name, '')}" for name in files]
+    if not_ident or left_out:
+        lines += ["", "## Left out", ""] + [f"- {x}" for x in not_ident + left_out]
+    notes = cal.notes()
+    if notes:
+        lines += ["", "## Notes from the calibration", ""] + [f"- {n}" for n in notes]
+    return "\n".join(lines) + "\n"

@@ -31,7 +31,7 @@ def test_record_calibrate_replay(short_drive, capsys):
     assert out["identified"] == {"vx": True, "vy": True, "wz": True}
     assert out["A"][0][0] == pytest.approx(0.9, rel=0.05)
     assert sorted(p.name for p in rep.iterdir()) == ["calibration.json", "command_response.png", "delay.png",
-                                                     "limits.png", "residuals.png"]
+                                                     "index.md", "limits.png", "residuals.png"]
     # the command-to-wheel latency per axis, with its interval (the profile's 0.05 s on the model's own response)
     assert set(out["latency_s"]) == {"vx", "vy", "wz"}
     for a in ("vx", "vy", "wz"):
