@@ -188,13 +188,12 @@ def run(args) -> int:
     if args.name is not None:
         found = {args.name: found.get(args.name, "module path")}
     info = {name: describe(name, origin) for name, origin in found.items()}
-    if args.json:
-        payload = {n: {k: v for k, v in d.items()} for n, d in info.items()}
-        for d in payload.values():
-            for r in d["parameters"] or []:
-                r.pop("value")
+    if args.json:                        # the rows as printed (default as TOML text, unit, what it is)
+        def plain(rows):
+            return None if rows is None else [{k: v for k, v in r.items() if k != "value"} for r in rows]
+        payload = {n: {**d, "parameters": plain(d["parameters"])} for n, d in info.items()}
         if args.name is not None and info[args.name]["parameters"] is None:
-            payload[args.name]["stack"] = [{k: v for k, v in r.items() if k != "value"} for r in stack_rows()]
+            payload[args.name]["stack"] = plain(stack_rows())
         print(strict_json(payload))
         return 0
     width = max(map(len, info), default=0)
