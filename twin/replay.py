@@ -151,8 +151,8 @@ def verdict_line(name: str, sc: list[Score]) -> str:
                 parts.append(f"{s.label} not compared ({s.label.split()[-1]} not identified)")
             continue
         nums = f"{name} {_fmt(s.model, s.resolution)}, nominal {_fmt(s.nominal, s.resolution)} {s.unit}"
-        parts.append(f"{s.label}: {'about equal' if s.better == 'equal' else s.better.replace('model', name) + ' better'}"
-                     f" ({nums})")
+        which = "about equal" if s.better == "equal" else f"{name if s.better == 'model' else 'nominal'} better"
+        parts.append(f"{s.label}: {which} ({nums})")
     worse = [s.label for s in sc if s.better == "nominal"]
     head = (f"verdict, {name} vs nominal (lower is better): "
             + (f"{name} WORSE on {', '.join(worse)}; " if worse else f"{name} no worse on any score; "))
@@ -663,7 +663,8 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
         k0 = max(int(np.searchsorted(data.odom.t, data.cmd.t[0], side="right")) - 1, 0)
         logged = data.odom.pose[k0:max(lk, k0 + 1)]
         start = data.odom.pose[k0:k0 + 1]            # both models start at the logged pose at the first command
-        paths = [("logged", logged), ("nominal", nominal.pose[:k] if k else start), ("model", run.pose[:k] if k else start)]
+        paths = [("logged", logged), ("nominal", nominal.pose[:k] if k else start),
+                 ("model", run.pose[:k] if k else start)]
         overlay(img, lambda xy: to_px(xy, cam, scale), scale, paths, route=data.odom.pose)
         tw = data.odom.twist[min(max(lk - 1, 0), len(data.odom.t) - 1)]
         put_text(img, [f"t = {t_log - data.cmd.t[0]:6.2f} s of {t_total:.1f} s   replay of {Path(data.path).name}",

@@ -37,7 +37,8 @@ def test_rmse_better_drift_worse_warns():
     assert "rmse vx: calibrated better" in verdict and "drift max: nominal better (calibrated 0.573, nominal 0.345 m)" \
         in verdict
     warn = [n for n in notes if n.startswith("WORSE")]
-    assert len(warn) == 2 and "drift max is larger than the nominal one's (calibrated 0.573, nominal 0.345 m)" in warn[0]
+    assert len(warn) == 2
+    assert "drift max is larger than the nominal one's (calibrated 0.573, nominal 0.345 m)" in warn[0]
     assert "larger on 1 of 3 5-s windows" in warn[0] and "10.0-15.0 s" in warn[0]
     res = ReplayResult("hand", 5.0, runs, notes, np.array([True, True, True]))
     assert res.worse_on == ["drift max", "yaw mean"] and res.worse_axes == res.worse_on
