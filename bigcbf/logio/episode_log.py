@@ -6,8 +6,9 @@ starts; base_link -> laser and imu_link, from the model's sites), /robot_descrip
 from its MJCF: :mod:`bigcbf.logio.urdf`), /goal_pose, /map (the scene's walls, boxes and cylinders as an occupancy
 grid) and /scene/markers (the same as markers). At every control step (T_C): /clock, /tf (odom -> base_link and
 the wheels' joint angles), /odom (the stack's state), /cmd_vel (u_safe), /cmd_vel_in (u_in), /ground_truth/odom,
-/imu, /behavior and, in a scene with pedestrians, /pedestrians/markers (where they truly are); /plan (the selected behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the
-six imagined paths of the selection) whenever they change. At every new LiDAR scan: /scan, /tracked_obstacles
+/imu, /behavior and, in a scene with pedestrians, /pedestrians/markers (where they truly are); /plan (the selected
+behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the six imagined paths of the
+selection) whenever they change. At every new LiDAR scan: /scan, /tracked_obstacles
 (markers), /obstacles (the estimates with their covariances) and /cbf/inflated_radius (the D_i rings of
 Eq. (14) the filter used at that step). /odom and /imu carry the covariances of the robot profile's sensor
 models (:mod:`bigcbf.logio.covariance`); /odom's are zero when the stack runs on the ground truth

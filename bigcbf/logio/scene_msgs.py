@@ -11,8 +11,9 @@ Occupancy grid (nav_msgs/OccupancyGrid, as Nav2's map_server publishes it): the 
 box of its declared area (``extent`` about the midpoint of start and goal, as the video's top view), its walls,
 boxes and cylinders, the robot's start and goal and the pedestrians' start -- is known: 100 where a cell's
 inscribed disc (radius = resolution / 2) overlaps a wall, box or cylinder, else 0 (a cell that only shares an edge
-with an obstacle is free; pedestrians move: they are not in the map). A margin of ``UNKNOWN_MARGIN_M`` around it is unknown (-1). The resolution is 0.05 m, coarser for
-scenes too large for ``MAX_CELLS`` cells at that resolution (0.1, 0.2, 0.25, 0.5, 1, 2, 5 m).
+with an obstacle is free; pedestrians move: they are not in the map). A margin of ``UNKNOWN_MARGIN_M`` around it is
+unknown (-1). The resolution is 0.05 m, coarser for scenes too large for ``MAX_CELLS`` cells at that resolution
+(0.1, 0.2, 0.25, 0.5, 1, 2, 5 m).
 """
 from __future__ import annotations
 

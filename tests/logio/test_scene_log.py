@@ -57,9 +57,9 @@ def test_scene_markers_are_the_scenarios_geometry(scene_log):
 
 
 def test_map_is_occupied_where_the_simulator_has_geometry(scene_log):
-    """Each cell against the simulator's own signed distances (bigcbf.sim.truth.Clearance): a cell whose centre is inside a
-    wall, box or cylinder is 100, one farther than a cell from all of them is 0 (inside the area) or -1 (the
-    margin); the cells in between overlap an obstacle with their inscribed disc and are 100."""
+    """Each cell against the simulator's own signed distances (bigcbf.sim.truth.Clearance): a cell whose centre is
+    inside a wall, box or cylinder is 100, one at least half a cell from all of them is 0 (inside the area) or -1
+    (the margin); the cells in between overlap an obstacle with their inscribed disc and are 100."""
     _, scene, msgs = scene_log
     msgtype, grid = msgs["/map"]
     assert msgtype == "nav_msgs/msg/OccupancyGrid" and grid.header.frame_id == "map"
