@@ -215,12 +215,6 @@ def test_bench_docs_page_is_none_of_the_bench_files(tmp_path, short_scene):
     assert snapshot(tmp_path) == before
 
 
-# run.py is wired by its owner: until `bigcbf run` calls check_distinct these cases fail (strict xfail: once
-# wired they pass, and the marker must go)
-RUN_WIRING = pytest.mark.xfail(strict=True, reason="bigcbf run does not call outputs.check_distinct yet")
-
-
-@RUN_WIRING
 def test_run_never_logs_onto_its_scenario(tmp_path, short_scene):
     scene = tmp_path / "sc.toml"
     scene.write_bytes(short_scene.read_bytes())
@@ -228,7 +222,6 @@ def test_run_never_logs_onto_its_scenario(tmp_path, short_scene):
     assert scene.read_bytes() == short_scene.read_bytes()
 
 
-@RUN_WIRING
 def test_run_video_and_log_on_one_path_is_refused(tmp_path, short_scene):
     out = tmp_path / "x.mp4"
     status, stdout, err = cli("run", short_scene, "--method", "cbf-only", "--video", out, "--log", out)

@@ -86,9 +86,12 @@ def load_run_scenario(scenario, seed: int, robot_profile=None):
 
 def run(args) -> int:
     from ..api import load_config, run_episode
-    from ..outputs import strict_json
+    from ..outputs import check_distinct, strict_json
 
     scenario = load_run_scenario(args.scenario, args.seed, args.robot_profile)
+    # before any work: no output onto an input (the scenario file, a profile) or onto the other output
+    check_distinct({"scenario": scenario.file, "--config": args.config, "--profile": args.profile,
+                    "--robot-profile": args.robot_profile}, {"--video": args.video, "--log": args.log})
     config = load_config(args.config, args.profile, notes=stderr_note)
     live = None
     if args.live is not None:
