@@ -50,6 +50,15 @@ class EpisodeLogger:
                              "/clock carries it")
         self.writer = writer if writer is not None else LogWriter(path, metadata=meta)
         self.path = self.writer.path
+        try:                             # the start's latched messages whole, or no file (an interrupt waits)
+            with critical:
+                self._start(episode)
+        except BaseException:
+            if writer is None:           # ours: dropped (a caller's writer is the caller's to close)
+                self.writer.abort()
+            raise
+
+    def _start(self, episode) -> None:
         self.world = episode.world
         # the robot's sensor covariances (bigcbf.logio.covariance); /odom is exact when the stack runs on the truth
         self._cov = (WorldCovariances(self.world) if hasattr(self.world, "reading_intervals") else None)

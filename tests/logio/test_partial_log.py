@@ -94,3 +94,41 @@ def test_finish_partial_replaces_an_older_partial_and_keeps_the_final_path(tmp_p
     assert w.finish_partial() is None                                        # once
     w.close()                                                                # then a no-op
     assert partial_path(Path("a/b.log")) == Path("a/b.log.partial.mcap")
+
+
+def test_a_signal_inside_a_log_write_waits_for_its_end():
+    """Inside ``critical`` (a message, a control step) SIGTERM and SIGINT are held until the section ends, then
+    raise KeyboardInterrupt naming the signal; outside, at once; the previous handlers come back afterwards."""
+    from bigcbf.logio.interrupts import critical, interrupts_as_keyboard_interrupt
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    with interrupts_as_keyboard_interrupt():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            done = []
+            with pytest.raises(KeyboardInterrupt, match=sig.name):
+                with critical:
+                    with critical:                                   # nested: held to the outermost end
+                        os.kill(os.getpid(), sig)
+                        time.sleep(0.01)
+                    done.append("inner")
+                    time.sleep(0.01)
+                    done.append("outer")
+            assert done == ["inner", "outer"]
+        with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1.0)
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+
+
+def test_an_interrupt_while_the_logger_starts_leaves_no_file(tmp_path, monkeypatch):
+    from bigcbf.episode import Episode
+    from bigcbf.logio.episode_log import EpisodeLogger
+    from bigcbf.params.stack import SIMULATION
+    from bigcbf.scenario import load_scenario
+
+    def interrupted(self, *a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(LogWriter, "scene_markers", interrupted)          # after /tf_static, URDF, goal, map
+    ep = Episode(load_scenario("corridor_meeting", 0), "big-cbf", 0, SIMULATION, time_limit_s=0.5)
+    with pytest.raises(KeyboardInterrupt):
+        EpisodeLogger(ep, tmp_path / "x.mcap")
+    assert list(tmp_path.iterdir()) == []
