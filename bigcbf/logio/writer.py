@@ -34,12 +34,12 @@ Topics and the method that writes each::
 
 (1) written once at the start with the QoS of a latched topic (durability transient local, as rosbag2 records
 it in the channel's ``offered_qos_profiles``), so a player gives them to late subscribers.
-(The scene's topics, in frame ``map``: :mod:`bigcbf.logio.scene_msgs`; the URDF: :mod:`bigcbf.logio.urdf`.)
+(2) covariances from the robot profile's sensor models when the caller gives them (the episode logger and the
+calibration recorder do: :mod:`bigcbf.logio.covariance`), else zero.
+The scene's topics are in frame ``map`` (:mod:`bigcbf.logio.scene_msgs`); the URDF: :mod:`bigcbf.logio.urdf`.
 
 A log that is interrupted (Ctrl-C, SIGTERM: :mod:`bigcbf.logio.interrupts`) can be kept: ``finish_partial()``
 completes it (summary and footer) as ``X.partial.mcap`` beside ``X.mcap``, never in the final file's place.
-(2) covariances from the robot profile's sensor models when the caller gives them (the episode logger and the
-calibration recorder do: :mod:`bigcbf.logio.covariance`), else zero.
 """
 from __future__ import annotations
 
