@@ -12,7 +12,8 @@ HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite
 
 def add_arguments(p):
     p.add_argument("--out", type=path_arg, required=True, metavar="DIR",
-                   help="output directory (created; rerunning with the same DIR resumes)")
+                   help="output directory: new, empty, or an earlier bench's (rerunning with the same DIR resumes); "
+                        "a folder holding other files is refused")
     p.add_argument("--methods", nargs="+", default=None, metavar="M",
                    help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
                         "every worker; default: every registered method)")
