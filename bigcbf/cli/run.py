@@ -1,7 +1,7 @@
 """bigcbf run: one episode of a scenario with a method and a seed."""
 from __future__ import annotations
 
-from .argtypes import float_in_closed, nonneg_int, path_arg, robot_profile_arg
+from .argtypes import float_in_closed, nonneg_int, path_arg, positive_float, robot_profile_arg
 
 #: the longest episode --time-limit allows [s] (a scenario file's own cap, bigcbf/scenario.py)
 MAX_TIME_LIMIT_S = 600.0
@@ -40,6 +40,9 @@ def add_arguments(p):
     p.add_argument("--live", nargs="?", type=int, const=8765, default=None, metavar="PORT",
                    help="stream the log's topics to Foxglove while the episode runs at real time (WebSocket on "
                         "127.0.0.1:PORT, default 8765; pip install 'bigcbf[live]')")
+    p.add_argument("--live-wait", type=positive_float, default=None, metavar="SECONDS",
+                   help="with --live: hold the start until a Foxglove client has subscribed, at most SECONDS "
+                        "(then start anyway, with a note)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -85,20 +88,34 @@ def load_run_scenario(scenario, seed: int, robot_profile=None):
 
 
 def run(args) -> int:
+    import sys
+
     from ..api import load_config, run_episode
+    from ..errors import UserError
+    from ..logio.interrupts import interrupts_as_keyboard_interrupt
     from ..outputs import check_distinct, strict_json
 
+    if args.live_wait is not None and args.live is None:
+        raise UserError("--live-wait needs --live")
     scenario = load_run_scenario(args.scenario, args.seed, args.robot_profile)
     # before any work: no output onto an input (the scenario file, a profile) or onto the other output
     check_distinct({"scenario": scenario.file, "--config": args.config, "--profile": args.profile,
                     "--robot-profile": args.robot_profile}, {"--video": args.video, "--log": args.log})
     config = load_config(args.config, args.profile, notes=stderr_note)
     live = None
-    if args.live is not None:
-        live = start_live(args.live)
     try:
-        res = run_episode(scenario, args.method, args.seed, config=config, perception=args.perception,
-                          time_limit_s=args.time_limit, video=args.video, camera=args.camera, log=args.log, live=live)
+        with interrupts_as_keyboard_interrupt():     # Ctrl-C, SIGTERM: one KeyboardInterrupt, never inside a log write
+            if args.live is not None:
+                live = start_live(args.live)
+                if args.live_wait is not None and not live.wait_for_client(args.live_wait):
+                    stderr_note(f"no Foxglove client subscribed within {args.live_wait:g} s; starting without one")
+            res = run_episode(scenario, args.method, args.seed, config=config, perception=args.perception,
+                              time_limit_s=args.time_limit, video=args.video, camera=args.camera, log=args.log,
+                              live=live)
+    except KeyboardInterrupt as exc:                 # the log recorded so far is kept as X.partial.mcap
+        for path in getattr(exc, "partial_logs", ()):
+            print(f"kept the log recorded so far as {path}", file=sys.stderr)
+        raise
     finally:
         if live is not None:
             live.close()
