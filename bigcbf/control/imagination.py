@@ -1,17 +1,21 @@
-"""Closed-loop behavior imagination and scoring (Eqs. 9, 10, 16, 17), vectorized over behaviors and obstacles.
+"""Closed-loop behavior imagination and scoring (eq:behavior_rollout (12), eq:behavior_terms (13),
+eq:behavior_cost (14), eq:behavior_acceptance (22), eq:analytic_workload (24)), vectorized over behaviors and
+obstacles.
 
 For every candidate b the imagined robot starts at the current state; at each step k = 0..N-1 the command
-u_k^b = pi_b(x_k^b, O^k, p_g) is regenerated from the imagined state and the predicted obstacles (Eq. 9), the
-robot is propagated over dt with the nominal execution model of Eq. (1) (A, d; the bounded residual r is
-unknown and enters only the uncertainty radius through e_exec), and the obstacles follow Eqs. (2)-(3).
+u_k^b = pi_b(x_k^b, O^k, p_g) is regenerated from the imagined state and the predicted obstacles
+(eq:behavior_rollout (12)), the robot is propagated over dt with the nominal execution model of eq:execution (1)
+(A, d; the bounded residual r is unknown and enters only the uncertainty radius through e_exec), and the obstacles
+follow eq:obs_prop (2) and eq:cov_prop (3).
 
-Commands exist for k = 0..N-1 (as in the paper's sums); the barrier test (Eq. 16) takes the minimum over the
-states k = 0..N and all obstacles, the terminal state's m_i (Eq. 15) using the last command u_{N-1}, the one
+Commands exist for k = 0..N-1 (as in the paper's sums); the barrier test (eq:behavior_acceptance (22)) takes the
+minimum over the states k = 0..N and all obstacles, the terminal state's m_i (eq:uncertainty_margin (21)) using the
+last command u_{N-1}, the one
 that brought the robot there. A robot already deeper than eps_h inside an inflated radius therefore rejects
 every behavior and triggers the reverse-release fallback.
 
-Freezing (F of Eq. 10) counts the steps with ||u_xy|| < v_freeze taken *outside* the goal region: standing
-still at the goal is the objective, not the "persistent stagnation" F is meant to penalize (without this, every
+Freezing (F of eq:behavior_terms (13)) counts the steps with ||u_xy|| < v_freeze taken *outside* the goal region:
+standing still at the goal is the objective, not the "persistent stagnation" F is meant to penalize (without this, every
 behavior that arrives within the horizon would be penalized against ones that circle the goal).
 
 The loop body inlines the formulas of ``behaviors`` and ``uncertainty`` (one numpy op per term over (B, M)
@@ -47,21 +51,22 @@ class Imagination:
     theta: np.ndarray      # (B, N+1) imagined yaw [rad]
     u: np.ndarray          # (B, N, 3) regenerated commands u_k, k = 0..N-1
     h_min: np.ndarray      # (B,) min over k = 0..N and i of h^img [m^2] (+inf without obstacles)
-    W: np.ndarray          # (B,) W~ of Eq. (17)
-    P: np.ndarray          # (B,) progress [m] (Eq. 10)
-    F: np.ndarray          # (B,) freezing fraction (Eq. 10)
-    S: np.ndarray          # (B,) smoothness (Eq. 10)
-    C_sw: np.ndarray       # (B,) switching indicator (Eq. 10)
-    J: np.ndarray          # (B,) cost of Eq. (10)
+    W: np.ndarray          # (B,) W~ of eq:analytic_workload (24)
+    P: np.ndarray          # (B,) progress [m] (eq:behavior_terms (13))
+    F: np.ndarray          # (B,) freezing fraction (eq:behavior_terms (13))
+    S: np.ndarray          # (B,) smoothness (eq:behavior_terms (13))
+    C_sw: np.ndarray       # (B,) switching indicator (eq:behavior_terms (13))
+    J: np.ndarray          # (B,) cost of eq:behavior_cost (14)
     available: np.ndarray  # (B,) bool: a candidate (YIELD needs a dynamic obstacle; REVERSE never is one)
-    accepted: np.ndarray   # (B,) bool: available and passes the barrier test of Eq. (16)
+    accepted: np.ndarray   # (B,) bool: available and passes the barrier test of eq:behavior_acceptance (22)
     deficit: np.ndarray | None = None    # (B,) sum over k = 1..N of max(0, -min_i h^img) [m^2] (the fallback's choice)
     margin: np.ndarray | None = None     # (B, N+1, M) the imagination's margin D_i - (r_R + r_i + d0) [m]: kappa_img
-                                         # m_i (Eq. 14), or BIG-CBF-NoShared's fixed margin
+                                         # m_i (eq:shared_barrier (20)), or BIG-CBF-NoShared's fixed margin
     #: (v_freeze N dt [m], (B,) bool: the rollout ends in the goal region), for :attr:`viable`
     params_stall: tuple | None = None
-    #: (B,) progress along the maneuver [m]: sum_k dt e_k^T w_k, e_k the direction of the behavior's command (Eq. 8)
-    #: at step k, w_k the imagined velocity (the filter model's with the governor); None: use P only
+    #: (B,) progress along the maneuver [m]: sum_k dt e_k^T w_k, e_k the direction of the behavior's command
+    #: (eq:behavior_feedback (11)) at step k, w_k the imagined velocity (the filter model's with the governor); None:
+    #: use P only
     along: np.ndarray | None = None
 
     def index(self, mode: str) -> int:
@@ -70,12 +75,12 @@ class Imagination:
     @property
     def viable(self) -> np.ndarray:
         """(B,) bool: the candidates the selection may retain (:class:`bigcbf.control.selection.BehaviorSelector`):
-        accepted (Eq. 16) and, for a moving behavior, *making progress*: the larger of its imagined progress P_b
-        (Eq. 10, goal distance) and its progress along its own maneuver (:attr:`along`) is at least what the freeze
-        speed would give over the horizon, v_freeze N dt, unless it reaches the goal region. Progress along the
-        maneuver keeps a sidestep in front of a wide obstacle viable: sliding along it barely shortens the goal
-        distance within the horizon (docs/fidelity.md, "Liveness"). YIELD stands still by design. Only with
-        ``StackParams.speed_governor``; without it: accepted."""
+        accepted (eq:behavior_acceptance (22)) and, for a moving behavior, *making progress*: the larger of its
+        imagined progress P_b (eq:behavior_terms (13), goal distance) and its progress along its own maneuver
+        (:attr:`along`) is at least what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches
+        the goal region. Progress along the maneuver keeps a sidestep in front of a wide obstacle viable: sliding along
+        it barely shortens the goal distance within the horizon (docs/fidelity.md, "Liveness"). YIELD stands still by
+        design. Only with ``StackParams.speed_governor``; without it: accepted."""
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
@@ -85,7 +90,8 @@ class Imagination:
 
 
 class _Constants:
-    """Per (modes, params) constants of the rollout (Eqs. 1, 7, 8), cached."""
+    """Per (modes, params) constants of the rollout (eq:execution (1), eq:behavior_subgoals (10),
+    eq:behavior_feedback (11)), cached."""
 
     def __init__(self, modes: tuple[str, ...], params: StackParams):
         ex = params.uncertainty.execution
@@ -97,7 +103,8 @@ class _Constants:
         self.any_pass = bool(self.pass_f.any())
         fwd_c = FORWARD_M[midx] * (1.0 - self.goal_f)                      # along d_g, 0 for GOAL rows
         side_lat = np.where(IS_SIDE[midx], SIDE_LATERAL_M * self.sigma, 0.0)
-        self.coef0 = fwd_c + 1j * side_lat         # e_b = d_g (fwd + i lat) for PASS/SIDE/YIELD rows (Eq. 7)
+        # e_b = d_g (fwd + i lat) for PASS/SIDE/YIELD rows (eq:behavior_subgoals (10))
+        self.coef0 = fwd_c + 1j * side_lat
         self.pass_sig_j = 1j * self.pass_f * self.sigma
         self.goal_rows = np.flatnonzero(self.goal_f).tolist()
         self.vmax = speed_limits(params)[midx]
@@ -142,10 +149,11 @@ class _Rollout:
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
              release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> _Rollout:
-    """Eq. (9): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot propagated with
-    the nominal Eq. (1), obstacles with Eqs. 2-3). Planar vectors are complex numbers (x + i y; R(theta) is
-    multiplication by e^{i theta}); all behaviors advance together, one numpy op per term and step.
-    ``release_v`` (B,) complex: the constant world velocity of each REVERSE row (default: the push)."""
+    """eq:behavior_rollout (12): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot
+    propagated with the nominal eq:execution (1), obstacles with eq:obs_prop (2) and eq:cov_prop (3)). Planar vectors
+    are complex numbers (x + i y; R(theta) is multiplication by e^{i theta}); all behaviors advance together, one numpy
+    op per term and step. ``release_v`` (B,) complex: the constant world velocity of each REVERSE row (default: the
+    push)."""
     unc = params.uncertainty
     N, dt = params.N, params.dt_s
     K = _constants(modes, params)
@@ -156,7 +164,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     sigma, any_pass, vmax, is_rev, any_rev = K.sigma, K.any_pass, K.vmax, K.is_rev, K.any_rev
     a_c, b_c, d_c, ideal_xy, a20, a21, dw, turning = K.a_c, K.b_c, K.d_c, K.ideal_xy, K.a20, K.a21, K.dw, K.turning
 
-    # ---- obstacles: predictions (Eqs. 2-4)
+    # ---- obstacles: predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
     Oc = cov = None
     if M:
         P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, unc))
@@ -172,7 +180,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         if govern:
             sig_k = obstacle_sigma_term(cov, params)                   # (N+1, M)
             gov_rows = np.flatnonzero(K.governed)
-        if any_pass:     # the relevant obstacle's group (Eq. (7) d_pass), from the obstacles at k = 0
+        if any_pass:     # the relevant obstacle's group (eq:behavior_subgoals (10) d_pass), from the obstacles at k = 0
             groups = obstacle_groups(obstacles.p, r, params)
             single = alone_in_group(groups)                            # (M,) alone in its group
             lone = bool(single.all())
@@ -197,14 +205,15 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     pass_fwd0 = FORWARD_M[MODE_INDEX["PASS-L"]]     # eq:behavior_subgoals's 0.85 m
     gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
     if M:
-        pass_floor = rR + r + PASS_EXTRA_M         # Eq. (7) floor r_R + r_i + 0.35
+        pass_floor = rR + r + PASS_EXTRA_M         # eq:behavior_subgoals (10) floor r_R + r_i + 0.35
         pass_extra = rR + PASS_EXTRA_M
 
     # progress along the maneuver: only the liveness option's viability test reads it (Imagination.along)
     along = np.zeros(B) if params.speed_governor else None
     for k in range(N):
         Pk[k] = p
-        # policy pi_b (Eqs. 6-8), regenerated from the imagined state and O^k (Eq. 9)
+        # policy pi_b (eq:goal_basis (9), eq:behavior_subgoals (10), eq:behavior_feedback (11)), regenerated from
+        # the imagined state and O^k (eq:behavior_rollout (12))
         g = pg - p
         dist = np.abs(g)
         outside = kernels.outside_goal_region(dist, eps_g)             # eq:goal_region
@@ -228,7 +237,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         e = dg * coef
         for gr in goal_rows:
             e[gr] = g[gr]
-        # Eq. (8): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||) (see feedback_velocity)
+        # eq:behavior_feedback (11): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||)
+        # (see feedback_velocity)
         v = e * np.minimum(gain, vmax * outside / np.maximum(np.abs(e), _TINY))
         if along is not None:
             nv = np.abs(v)
@@ -274,7 +284,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
 
 def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                   modes: tuple[str, ...]) -> np.ndarray:
-    """The imagined positions (B, N+1, 2) of ``modes`` (Eq. 9), without scoring."""
+    """The imagined positions (B, N+1, 2) of ``modes`` (eq:behavior_rollout (12)), without scoring."""
     ro = _rollout(state, obstacles, np.asarray(goal, float), params, tuple(modes))
     return np.stack([ro.P.real, ro.P.imag], -1)
 
@@ -297,11 +307,13 @@ def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: St
 def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
                    shared: bool = True) -> tuple[np.ndarray, Imagination, int]:
     """The reverse-release fallback's velocity (2,) [m/s, odom], chosen from :func:`release_candidates` by what it
-    makes possible: each candidate's rollout (Eq. 9, the same prediction and shared barrier as the behaviors,
-    Eqs. 14-16) is followed for one selection period T_B (the time it will be executed before the next selection),
-    and from where it leaves the robot the six behaviors are imagined again (the obstacles predicted T_B ahead,
-    Eqs. 2-3). The candidate after which the best *viable* behavior (accepted by Eq. (16) and not frozen; see
-    :class:`bigcbf.control.selection.BehaviorSelector`) has the lowest J of Eq. (10) is chosen: the release aims at
+    makes possible: each candidate's rollout (eq:behavior_rollout (12), the same prediction and shared barrier as
+    the behaviors, eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) is followed for
+    one selection period T_B (the time it will be executed before the next selection), and from where it leaves the
+    robot the six behaviors are imagined again (the obstacles predicted T_B ahead, eq:obs_prop (2) and eq:cov_prop
+    (3)). The candidate after which the best *viable* behavior (accepted by eq:behavior_acceptance (22) and not
+    frozen; see :class:`bigcbf.control.selection.BehaviorSelector`) has the lowest J of eq:behavior_cost (14) is
+    chosen: the release aims at
     making a maneuver possible again rather than merely backing off. When no candidate leads to a viable behavior,
     the one with the least accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img) (it leaves the
     inflated radii soonest and enters none on the way); ties go to the first in the fan's order, the push. The
@@ -319,8 +331,8 @@ def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackP
 
 def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackParams, *,
                     shared: bool = True) -> np.ndarray:
-    """For each release rollout of ``rel``: the lowest J (Eq. 10) of a viable behavior imagined from the state the
-    release reaches after T_B (+inf when none is viable), see :func:`choose_release`."""
+    """For each release rollout of ``rel``: the lowest J (eq:behavior_cost (14)) of a viable behavior imagined from the
+    state the release reaches after T_B (+inf when none is viable), see :func:`choose_release`."""
     R = len(rel.modes)
     kB = min(int(round(params.T_B_s / params.dt_s)), params.N)
     tB = kB * params.dt_s
@@ -341,7 +353,8 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> Imagination:
-    """Eq. (9) rollouts of ``modes`` from ``state`` and their scores (Eqs. 10, 16, 17).
+    """eq:behavior_rollout (12) rollouts of ``modes`` from ``state`` and their scores (eq:behavior_terms (13),
+    eq:behavior_cost (14), eq:behavior_acceptance (22), eq:analytic_workload (24)).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
     ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0). ``release_v``: see :func:`_rollout`.
@@ -370,7 +383,8 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
 
-    # ---- shared barrier (Eqs. 14-16) and analytic compatibility W~ (Eq. 17), all (b, k, i) at once
+    # ---- shared barrier (eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) and
+    # analytic compatibility W~ (eq:analytic_workload (24)), all (b, k, i) at once
     W = np.zeros(B)
     h_min = np.full(B, np.inf)
     deficit = np.zeros(B)
@@ -402,7 +416,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
         viol = np.maximum(-gamma, 0.0)
         W = (viol * viol / (grad2 + params.w_eps)).reshape(B, -1).sum(axis=1)
 
-    # ---- scores (Eq. 10)
+    # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14))
     P_hist = np.stack([Pc.real, Pc.imag], -1)
     Pr = np.abs(pg - Pc[:, 0]) - np.abs(pg - Pc[:, N])
     outside = kernels.outside_goal_region(np.abs(pg - Pc[:, :N]), params.eps_g_m)   # standing still there is arrival

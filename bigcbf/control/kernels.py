@@ -1,9 +1,11 @@
 """One implementation of each of the paper's equations that several layers evaluate (issue 17).
 
 The behaviors, the imagination, the CBF rows, the speed governor and every baseline call these functions instead
-of writing the formula again; each names its equation by the LaTeX label of /work/shared/paper/big-cbf.tex (the
-paper's number in brackets, counting every numbered display: eq:execution (1), eq:obs_prop (2), eq:cov_prop (3),
-eq:goal_region (5), eq:shared_barrier (20), eq:uncertainty_margin (21), eq:cbf_condition (25)).
+of writing the formula again; each names its equation as ``eq:label (N)``, the LaTeX label in the paper's source
+and the number the paper prints (every numbered display counted; see ``bigcbf/control/__init__.py``): eq:execution
+(1), eq:obs_prop (2), eq:cov_prop (3), eq:goal_region (5), eq:shared_barrier (20), eq:uncertainty_margin (21),
+eq:cbf_condition (25). The paper: S. Li, Z. Wang, J. Cao, J. Yang, K. Wu, "BIG-CBF: Behavior-Imagination-Guided
+Control Barrier Function with Shared Uncertainty for Mobile Robot Navigation".
 
 Bit-for-bit: the physics runs are deterministic and their golden values are checked, so each kernel keeps the
 arithmetic order its callers had (the order is part of the contract, written next to each formula); the
