@@ -13,9 +13,9 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead (s_i - r_i <
   ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + ``in_way_margin_m``, i.e. driving straight to the
   goal would bring the footprint closer than d0 + 0.15 m to it, about the imagination's own margin for a static
-  obstacle (the barrier test of Eq. (16)). Wall points (radius 0) take part like any obstacle. (With d_pass_min,
-  0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS steered
-  around the outside of one of them, into it: docs/fidelity.md, "Behavior imagination and selection".)
+  obstacle (the barrier test of eq:behavior_acceptance (22)). Wall points (radius 0) take part like any obstacle. (With
+  d_pass_min, 0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS
+  steered around the outside of one of them, into it: docs/fidelity.md, "Behavior imagination and selection".)
 * The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or, for a relevant obstacle alone in
   its group (one the footprint can pass on either side: a post, a person), its along-track distance s_i when that
   is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass aims at the point beside the

@@ -1,5 +1,5 @@
 """The BIG-CBF planner (and its NoShared ablation): behavior selection every T_B, the selected feedback policy
-regenerated at every control tick (Eq. 5). Its u_in goes to the common CbfFilter.
+regenerated at every control tick (eq:online_behavior_command (8)). Its u_in goes to the common CbfFilter.
 
 What a selection keeps: the mode, and when the mode is the REVERSE fallback, the release velocity the
 imagination chose for it (:func:`~bigcbf.control.imagination.choose_release`); no imagined trajectory or command
@@ -28,10 +28,11 @@ class BigCbfPlanner:
 
     NoShared as the paper writes it (Sec. IV-C, "Ablation design"; Sec. V for the hardware): "the same behavior
     library, feedback policies, horizon, switching logic, and final hard CBF as BIG-CBF, but replaces the
-    imagination-layer uncertainty construction in Eq. (uncertainty_margin) with a fixed 0.30-m geometric margin".
+    imagination-layer uncertainty construction in [eq:uncertainty_margin (21)] with a fixed 0.30-m geometric margin".
     Checked against this code: the two variants share the behaviors and policies (``behaviors``), N and dt, the
-    scoring (Eqs. 10, 17) and the selector (dwell, switching threshold, side commitment), the reverse-release
-    fallback and the rollouts' execution model (A, d of Eq. (1), which propagates the imagined robot in both), and
+    scoring (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)) and the selector (dwell,
+    switching threshold, side commitment), the reverse-release fallback and the rollouts' execution model (A, d of
+    eq:execution (1), which propagates the imagined robot in both), and
     the common CbfFilter with the full shared D_i^exec. The one difference is in ``imagine`` (and the fallback's
     release choice, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
     of r_R + r_i + d0 + kappa_img m_i, and, following from it, the band within which an obstacle counts as "in the
@@ -69,7 +70,8 @@ class BigCbfPlanner:
         return self.selector.mode
 
     def select(self, t: float, state: RobotState, obstacles: Obstacles, goal) -> Selection:
-        """One behavior-selection cycle (Eqs. 9, 10, 16, 17): imagine, score, select; keeps only the mode."""
+        """One behavior-selection cycle (eq:behavior_rollout (12), eq:behavior_terms (13), eq:behavior_cost (14),
+        eq:behavior_acceptance (22), eq:analytic_workload (24)): imagine, score, select; keeps only the mode."""
         p = self.params
         img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode)
         sel = self.selector.select(t, img)
@@ -97,7 +99,7 @@ class BigCbfPlanner:
             self._next_t = nxt
         mode = self.selector.mode
         u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
-                         self.params)                                                         # Eq. (5)
+                         self.params)                                   # eq:online_behavior_command (8)
         if mode not in (REVERSE, "YIELD"):
             u = govern_command(state, obstacles, u, self.params)[0]                           # governor.py
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,

@@ -1,23 +1,23 @@
 """Speed along a candidate: the CBF speed governor of BIG-CBF's behavior policies.
 
-**What the paper leaves open.** Eq. (8) (``eq:behavior_feedback``) drives each behavior towards its subgoal at up to
-a "behavior-dependent speed limit" v_b^max, and Eq. (9) (``eq:behavior_rollout``) imagines every candidate with that
+**What the paper leaves open.** ``eq:behavior_feedback`` (11) drives each behavior towards its subgoal at up to a
+"behavior-dependent speed limit" v_b^max, and ``eq:behavior_rollout`` (12) imagines every candidate with that
 command; the paper does not say how fast a behavior should move near obstacles, nor what the imagination assumes
 the hard CBF will do there. Taken literally (v_b^max = 0.8 m/s for GOAL and PASS, 0.55 m/s for SIDE, everywhere),
-every candidate is imagined at full speed. The shared radius m_i of Eq. (15) grows with the command through
-tau95 ||R(A u + d) - v_i|| and e_exec(u): with the calibrated tau95 = 0.21 s it is about 0.17 m larger at 0.8 m/s
-than at rest. In a 0.9 m gap between two posts the robot's centre is 0.45 m from each surface, while r_R + d0 + m_i
-is about 0.47 m at full speed and 0.30 m at rest: every full-speed candidate is rejected by Eq. (16)
-(``eq:behavior_acceptance``) ~0.1 m before the narrowest point, the reverse-release fallback fires, and the robot
+every candidate is imagined at full speed. The shared radius m_i of eq:uncertainty_margin (21) grows with the command
+through tau95 ||R(A u + d) - v_i|| and e_exec(u): with the calibrated tau95 = 0.21 s it is about 0.17 m larger at
+0.8 m/s than at rest. In a 0.9 m gap between two posts the robot's centre is 0.45 m from each surface, while
+r_R + d0 + m_i is about 0.47 m at full speed and 0.30 m at rest: every full-speed candidate is rejected by
+``eq:behavior_acceptance`` (22) ~0.1 m before the narrowest point, the reverse-release fallback fires, and the robot
 repeats this. The execution filter has the same blind spot: it evaluates D_i^exec at u_in (Sec. III-C) and holds
 it fixed, so a full-speed u_in makes the gap infeasible for the filter too, while the same gap at 0.3 m/s is wide.
 
 **Our choice: the speed along a candidate is the one that makes the most progress once the common CBF has acted
-on it.** For the policy's world velocity v_b (Eq. 8, direction kept) and a scale s on ``GOVERNOR_GRID``
-(1, 0.9, ..., 0.1, 0), the command s u_b (u_b = R^T v_b) is checked against the CBF condition of Eq. (18)
-(``eq:cbf_condition``) of every obstacle, with D_i^exec (Eqs. 14-15, kappa_exec) evaluated at that command, exactly
-as the execution filter evaluates it. In the realized velocity w (Eq. 1: w(s) = R(theta)(A s u_b + d)) each row is
-a half-plane,
+on it.** For the policy's world velocity v_b (eq:behavior_feedback (11), direction kept) and a scale s on
+``GOVERNOR_GRID`` (1, 0.9, ..., 0.1, 0), the command s u_b (u_b = R^T v_b) is checked against the CBF condition
+``eq:cbf_condition`` (25) of every obstacle, with D_i^exec (eq:shared_barrier (20), eq:uncertainty_margin (21),
+kappa_exec) evaluated at that command, exactly as the execution filter evaluates it. In the realized velocity w
+(eq:execution (1): w(s) = R(theta)(A s u_b + d)) each row is a half-plane,
 
     gamma_i = 2 q_i^T (w - v_i) + alpha (||q_i||^2 - D_i(s u_b)^2) >= 0
             <=>  n_i^T w >= n_i^T v_i - alpha h_i(s) / (2 ||q_i||),     n_i = q_i / ||q_i||,
@@ -39,27 +39,30 @@ maneuver whose direction has a component into an obstacle to a crawl: a PASS or 
 (forward part blocked, lateral part free) scored its full-speed slide and a slow slide alike, so the near-tie rule
 took the slow one, and the sidestep the scene needs moved at ~0.1 m/s (required_sidestepping, seeds 0-2: 0/3 with
 the correction, 3/3 without it; docs/fidelity.md, "Liveness"). The governed command is s* u_b; in the rollout
-(Eq. 9) the robot moves with w*(s*), the filter model's velocity, while the scores (Eq. 10: W, F, S) and the
-acceptance (Eq. 16) use the governed command.
+(eq:behavior_rollout (12)) the robot moves with w*(s*), the filter model's velocity, while the scores (W of
+eq:analytic_workload (24); F, S of eq:behavior_terms (13)) and the acceptance (eq:behavior_acceptance (22)) use the
+governed command.
 
 Why this is principled (it holds in scenes nobody has drawn): it is the speed the filter itself would let this
-direction have, computed with the same formulas (Eqs. 14, 15, 18), the same kappa_exec and the same obstacles, so
-(i) the imagination (Eq. 9) rolls out the command that will actually be executed, and m_i in Eq. (16) is
-evaluated at that speed: a gap is judged by whether the robot can pass it at the speed it will pass it; (ii) where
+direction have, computed with the same formulas (eq:shared_barrier (20), eq:uncertainty_margin (21),
+eq:cbf_condition (25)), the same kappa_exec and the same obstacles, so (i) the imagination (eq:behavior_rollout
+(12)) rolls out the command that will actually be executed, and m_i in eq:behavior_acceptance (22) is evaluated at
+that speed: a gap is judged by whether the robot can pass it at the speed it will pass it; (ii) where
 the filter would only slow the command down, the executed u_in is already CBF-admissible, so the filter leaves it
 alone and D_i^exec is evaluated at the speed actually driven. A candidate that must slow down
-earns less progress P and, if it must stop, the freezing penalty F (Eq. 10): the speed cost is scored, not hidden.
+earns less progress P and, if it must stop, the freezing penalty F (eq:behavior_terms (13)): the speed cost is scored,
+not hidden.
 
 Scope: the governor is part of BIG-CBF's policies pi_b (GOAL, PASS, SIDE; YIELD commands zero, the REVERSE
-fallback keeps its chosen release velocity), applied identically in the rollout (Eq. 9, with the predicted
-obstacles O^k of Eqs. 2-3) and at every control tick (Eq. 5). BIG-CBF-NoShared shares the policies, so it shares the
-governor (its ablation stays in the imagination's margin). CBF-only and the baselines are untouched: their
-commands are their own. It uses every obstacle the policy sees (all tracks and wall points), a superset of the
-filter's rows (``cbf.select_constraints``), so it is never less conservative than the filter. It is an option,
-off by default: ``StackParams.speed_governor = true`` (``[stack]`` of a run configuration) switches it on together
-with the selection's viability test and the release outlook (docs/fidelity.md, "Liveness"), which it needs; on the
-nine paper scenes it is worse than the paper's reading (measured there). No QP solver is called: 11 scales, each
-with a closed-form 2-D projection, for all candidates and steps at once.
+fallback keeps its chosen release velocity), applied identically in the rollout (eq:behavior_rollout (12), with
+the predicted obstacles O^k of eq:obs_prop (2) and eq:cov_prop (3)) and at every control tick
+(eq:online_behavior_command (8)). BIG-CBF-NoShared shares the policies, so it shares the governor (its ablation stays in
+the imagination's margin). CBF-only and the baselines are untouched: their commands are their own. It uses every
+obstacle the policy sees (all tracks and wall points), a superset of the filter's rows (``cbf.select_constraints``), so
+it is never less conservative than the filter. It is an option, off by default: ``StackParams.speed_governor = true``
+(``[stack]`` of a run configuration) switches it on together with the selection's viability test and the release outlook
+(docs/fidelity.md, "Liveness"), which it needs; on the nine paper scenes it is worse than the paper's reading (measured
+there). No QP solver is called: 11 scales, each with a closed-form 2-D projection, for all candidates and steps at once.
 """
 from __future__ import annotations
 
@@ -117,12 +120,12 @@ def filter_model(w0, n, l, v_max: float) -> np.ndarray:
 
 
 def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
-    """The governor (module docstring; Eq. (18) ``eq:cbf_condition`` with D_i of Eqs. (14)-(15)
-    ``eq:shared_barrier``/``eq:uncertainty_margin``) on complex planar vectors, for B robot states at once.
+    """The governor (module docstring; ``eq:cbf_condition`` (25) with D_i of ``eq:shared_barrier`` (20) and
+    ``eq:uncertainty_margin`` (21)) on complex planar vectors, for B robot states at once.
 
-    p (B,) positions, rot (B,) e^{i theta}, u (B,) body commands u_x + i u_y of Eq. (8) (u_w = 0), obs_p (M,)
-    obstacle positions, obs_v (M,) velocities, obs_sig (M,) beta sqrt(lambda_max(Sigma_i)) [m], obs_r (M,) radii.
-    Returns the scale s* (B,) and the filter model's realized velocity w* (B,) of the governed command s* u.
+    p (B,) positions, rot (B,) e^{i theta}, u (B,) body commands u_x + i u_y of eq:behavior_feedback (11) (u_w = 0),
+    obs_p (M,) obstacle positions, obs_v (M,) velocities, obs_sig (M,) beta sqrt(lambda_max(Sigma_i)) [m], obs_r (M,)
+    radii. Returns the scale s* (B,) and the filter model's realized velocity w* (B,) of the governed command s* u.
     """
     p, rot, u = np.asarray(p, complex), np.asarray(rot, complex), np.asarray(u, complex)
     B = p.shape[0]
@@ -146,7 +149,7 @@ def govern_c(p, rot, u, obs_p, obs_v, obs_sig, obs_r, params: StackParams) -> tu
     # kernels.inflated_radius ((r_R + r_i) + d0): the governor models the filter (equal to rounding)
     D = (unc.r_robot_m + unc.d0_m) + np.asarray(obs_r, float) + unc.kappa_exec * m
     h = kernels.barrier(qn * qn, D)
-    # Eq. (18) in the realized velocity w: Re(conj(n_i) w) >= Re(conj(n_i) v_i) - alpha h_i / (2 ||q_i||)
+    # eq:cbf_condition (25) in the realized velocity w: Re(conj(n_i) w) >= Re(conj(n_i) v_i) - alpha h_i / (2 ||q_i||)
     lim = (nrm.real * obs_v.real + nrm.imag * obs_v.imag) - params.alpha_per_s * h / (2.0 * qn)
     viol = lim - (nrm.real * W0[:, :, None].real + nrm.imag * W0[:, :, None].imag)
     Kr = min(MODEL_ROWS, M)
@@ -170,7 +173,7 @@ def obstacle_sigma_term(cov, params: StackParams) -> np.ndarray:
 
 def govern_command(state: RobotState, obstacles: Obstacles, u, params: StackParams) -> tuple[np.ndarray, float]:
     """The governed body command s* u (3,) and s* for one robot state (module docstring). ``u`` (3,) is a behavior's
-    body twist from Eq. (8); its yaw rate is scaled with it (the behaviors command none)."""
+    body twist from eq:behavior_feedback (11); its yaw rate is scaled with it (the behaviors command none)."""
     u = np.asarray(u, float).reshape(3)
     if len(obstacles) == 0 or not params.speed_governor:
         return u, 1.0

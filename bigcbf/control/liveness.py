@@ -19,8 +19,8 @@ sided modes always has 0; for it (and for every method alike) use the lateral re
 **Lateral reversals (from the command).** Defined for every method from what the robot is told to do: at each
 control step, the lateral component of the filtered command u_safe (the body twist sent to the wheels) in the
 odom frame, relative to the goal direction seen from the robot, v_lat = (R(theta) [vx, vy]) . n_g, with n_g the
-left normal of the unit vector d_g from the robot's position p to the goal (the goal basis of Eq. (6),
-``eq:goal_basis``). The step's side is +1 (left) if v_lat >= ``LATERAL_DEAD_BAND_MPS``, -1 (right) if
+left normal of the unit vector d_g from the robot's position p to the goal (the goal basis
+``eq:goal_basis`` (9)). The step's side is +1 (left) if v_lat >= ``LATERAL_DEAD_BAND_MPS``, -1 (right) if
 v_lat <= -``LATERAL_DEAD_BAND_MPS``, else 0; steps closer to the goal than ``LATERAL_NEAR_GOAL_M`` count as 0
 (the goal direction turns quickly there). A side becomes *established* once it has held for
 ``LATERAL_HOLD_S`` without interruption (n consecutive steps of period T_C last n T_C); each established side that

@@ -34,7 +34,8 @@ METHODS: Registry[Callable[[StackParams], Planner]] = Registry("method")
 
 
 class CbfOnlyPlanner:
-    """CBF-only: the GOAL feedback policy (Eqs. 6-8 with b = GOAL) straight into the common CBF filter."""
+    """CBF-only: the GOAL feedback policy (eq:goal_basis (9), eq:behavior_subgoals (10), eq:behavior_feedback (11)
+    with b = GOAL) straight into the common CBF filter."""
 
     name = "cbf-only"
 

@@ -41,7 +41,7 @@ def p95(samples) -> float:
 
 
 def cbf_energy(u_safe, u_in, R_u) -> float:
-    """Eq. (20), ``eq:sim_cbf_energy``: E_CBF = sum_k (u_safe,k - u_in,k)^T R_u (u_safe,k - u_in,k).
+    """``eq:sim_cbf_energy`` (27): E_CBF = sum_k (u_safe,k - u_in,k)^T R_u (u_safe,k - u_in,k).
 
     ``u_safe``, ``u_in``: (3,) for one step or (K, 3) for a sequence; ``R_u``: (3,) diagonal or (3, 3).
     """
@@ -67,7 +67,7 @@ class EpisodeMetrics:
     arrived), :meth:`control_step` at every control step (after the command left), and :meth:`physics` after every
     block of physics steps (the true clearance measured then). Definitions:
 
-    - ``e_cbf``: Eq. (20) (``eq:sim_cbf_energy``) summed over the control steps with the fixed R_u;
+    - ``e_cbf``: ``eq:sim_cbf_energy`` (27) summed over the control steps with the fixed R_u;
       ``e_cbf_infeasible``: its part from steps whose hard QP was infeasible.
     - ``cbf_active_ratio``, ``qp_infeasible_ratio``: fractions of the control steps whose filter had an active
       constraint / an infeasible QP (0 with no step).

@@ -7,7 +7,7 @@ cbf_qp_p95_ms: one CbfFilter.filter call with 8 obstacle constraints plus the bo
 (8 obstacles in a ring around the robot, u_in sweeping round so that different constraints become active, as in
 a control loop where consecutive commands are close).
 cbf_pass_p95_ms: a filter call whose box-clipped u_in is already safe (no QP).
-plan_tick_p95_ms: a BIG-CBF plan() call between selections (Eq. 5 policy regeneration only).
+plan_tick_p95_ms: a BIG-CBF plan() call between selections (eq:online_behavior_command (8) policy regeneration only).
 """
 from __future__ import annotations
 

@@ -23,8 +23,8 @@ class PlanInfo:
     planned: bool                      # an expensive planning cycle (e.g. a behavior selection) ran in this call
     planner_ms: float                  # time of this call [ms]
     path: np.ndarray | None = None     # (K, 2) imagined/predicted path of the selected option (odom) [m], for videos
-    #: the imagination layer's margins kappa_img m_i (Eq. 14) of the selected option's rollout, over its steps and
-    #: obstacles [m] (flat), when a selection ran this call; None for methods without an imagination layer.
+    #: the imagination layer's margins kappa_img m_i (eq:shared_barrier (20)) of the selected option's rollout, over its
+    #: steps and obstacles [m] (flat), when a selection ran this call; None for methods without an imagination layer.
     #: For BIG-CBF-NoShared the fixed margin that replaces them.
     margins_img: np.ndarray | None = None
 

@@ -1,5 +1,5 @@
-"""Behavior selection (Eq. 10 ranking of the candidates accepted by Eq. 16), with a minimum dwell time, a
-relative switching-improvement threshold, and the reverse-release fallback."""
+"""Behavior selection (eq:behavior_cost (14) ranking of the candidates accepted by eq:behavior_acceptance (22)),
+with a minimum dwell time, a relative switching-improvement threshold, and the reverse-release fallback."""
 from __future__ import annotations
 
 import math
@@ -23,11 +23,13 @@ class BehaviorSelector:
     """Keeps b_cur and decides, at each selection, between keeping it and switching.
 
     Rules, in order:
-    1. No candidate viable (Eq. 16 rejects all, or only unavailable or frozen ones remain): REVERSE (fallback).
+    1. No candidate viable (eq:behavior_acceptance (22) rejects all, or only unavailable or frozen ones remain):
+       REVERSE (fallback).
     2. No retained regular mode yet, or the retained one is REVERSE or now rejected: the lowest-J accepted one.
     3. The retained mode was selected less than ``dwell_s`` ago: keep it.
     4. Switch only if the best accepted J beats J_cur by more than switch_rel |J_cur| + switch_abs; else keep.
-    J already contains w_sw C_sw (Eq. 10). Ties go to the first mode in the behavior order (deterministic).
+    J already contains w_sw C_sw (eq:behavior_cost (14)). Ties go to the first mode in the behavior order
+    (deterministic).
 
     Side commitment (the switching threshold applied to the side): once a left or right mode (PASS/SIDE-L or -R)
     has been selected, "the best" in rules 2 and 4 is taken among the accepted modes on that side or on none
@@ -39,10 +41,10 @@ class BehaviorSelector:
 
     Frozen candidates (our choice; the paper invokes the fallback "if all regular behaviors fail the acceptance
     test"): with the speed governor (``bigcbf.control.governor``) a behavior whose direction is blocked does not
-    run into the inflated radius, where Eq. (16) would reject it; it slows down to a stop in front of it. A moving
-    behavior (GOAL, PASS, SIDE) whose governed rollout gains less progress than the freeze speed would over the
-    horizon, v_freeze N dt, both in goal distance (P_b of Eq. 10) and along its own maneuver, and does not end in the
-    goal region, can no more proceed than a rejected one, so it is treated as one
+    run into the inflated radius, where eq:behavior_acceptance (22) would reject it; it slows down to a stop in front of
+    it. A moving behavior (GOAL, PASS, SIDE) whose governed rollout gains less progress than the freeze speed would over
+    the horizon, v_freeze N dt, both in goal distance (P_b of eq:behavior_terms (13)) and along its own maneuver, and
+    does not end in the goal region, can no more proceed than a rejected one, so it is treated as one
     (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and when no candidate is left the
     reverse-release fallback is invoked, as when all are rejected. YIELD is exempt (standing still is what it does). Rules 1-4 read "viable" for "accepted".
     """

@@ -1,7 +1,7 @@
 """The CBF filter's small QPs solved exactly: Goldfarb and Idnani's dual active-set method (Math. Prog. 27, 1983).
 
-Two problems, both from ``bigcbf.control.cbf`` (eq:hard_cbf_qp, Eq. (19), with the rows of eq:cbf_condition,
-Eq. (18), normalized to C_i u >= l_i):
+Two problems, both from ``bigcbf.control.cbf`` (eq:hard_cbf_qp (26), with the rows of eq:cbf_condition (25),
+normalized to C_i u >= l_i):
 
 - the hard QP: min_u (u - u_in)^T H (u - u_in) s.t. C u >= l, u_min <= u <= u_max (3 variables, H diagonal > 0);
 - its slack form, used when the hard QP is infeasible: min_(u, t) (u - u_in)^T H (u - u_in) + P t s.t.
@@ -239,7 +239,7 @@ def _box_rows(C, l, lo, hi, slack):
 
 @kernel
 def solve_hard(C, l, u_in, Hd, lo, hi):
-    """Eq. (19): min (u - u_in)^T diag(Hd) (u - u_in) s.t. C u >= l, lo <= u <= hi. Returns (status, u)."""
+    """eq:hard_cbf_qp (26): min (u - u_in)^T diag(Hd) (u - u_in) s.t. C u >= l, lo <= u <= hi. Returns (status, u)."""
     N, b = _box_rows(C, l, lo, hi, False)
     Qd = 2.0 * Hd
     g = -Qd * u_in
