@@ -18,10 +18,13 @@ What a frame shows (the legend in a band below the scene names each item present
 - the goal (green disc, in the scene).
 
 Text: method, time, behavior mode, speed, whether the CBF is active (and a red bar at the bottom while it is).
-H.264 MP4 via bigcbf.sim.render.VideoWriter.
+H.264 MP4 via bigcbf.sim.render.VideoWriter; on a terminal a progress line on stderr (bigcbf.progress). An
+interrupted video (Ctrl-C; SIGTERM under the command line's handler) is kept as ``X.partial.mp4``
+(:meth:`EpisodeVideo.finish_partial`).
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import NamedTuple
 
@@ -29,7 +32,8 @@ import numpy as np
 
 from .episode import Episode, StepRecord
 from .sim.render import (Renderer, VideoWriter, add_arrow, add_disc, add_points, add_polyline, add_ring, boxes_overlap,
-                         draw_legend, label_box, meters_per_pixel, project, put_label, put_text, with_legend_strip)
+                         draw_dots, draw_legend, label_box, meters_per_pixel, project, put_label, put_text,
+                         with_legend_strip)
 
 CBF_ACTIVE_RGB = (255, 90, 60)
 
@@ -96,6 +100,19 @@ class Overlay:
         """A line width: ``pixels`` wide in the top view (at least ``metres``), ``metres`` in the track view."""
         return metres if self.mpp is None else max(metres, pixels * self.mpp)
 
+    def _lidar_hits(self, rec: StepRecord) -> np.ndarray | None:
+        """Every other LiDAR hit of the step's scan in the world (N, 2), placed with the robot's true pose."""
+        if rec.scan is None:
+            return None
+        ts = rec.true_state
+        r = np.asarray(rec.scan.ranges, float)
+        ok = np.isfinite(r)
+        a = rec.scan.angles[ok]
+        lx, ly = self.laser_xy
+        c, s = np.cos(ts.theta), np.sin(ts.theta)
+        ox, oy = ts.px + c * lx - s * ly, ts.py + s * lx + c * ly
+        return np.stack([ox + r[ok] * np.cos(ts.theta + a), oy + r[ok] * np.sin(ts.theta + a)], 1)[::2]
+
     def _imagination(self):
         img = getattr(self.ep.planner, "last_imagination", None)
         return img if img is not None and getattr(img, "p", None) is not None else None
@@ -109,19 +126,13 @@ class Overlay:
         img = self._imagination()
         r_robot = self.ep.params.uncertainty.r_robot_m
         trail = self.trail + [(ts.px, ts.py)]
+        hits = self._lidar_hits(rec)
 
         def decorate(scn):
             if len(trail) > 1:
                 add_polyline(scn, np.array(trail), z=z0 + 0.02, width=self._w(2.0, 0.02), rgba=TRAIL_RGBA)
-            if rec.scan is not None:
-                r = np.asarray(rec.scan.ranges, float)
-                ok = np.isfinite(r)
-                a = rec.scan.angles[ok]
-                lx, ly = self.laser_xy
-                c, s = np.cos(ts.theta), np.sin(ts.theta)
-                ox, oy = ts.px + c * lx - s * ly, ts.py + s * lx + c * ly
-                pts = np.stack([ox + r[ok] * np.cos(ts.theta + a), oy + r[ok] * np.sin(ts.theta + a)], 1)
-                add_points(scn, pts[::2], z=z0 + 0.19, radius=self._w(2.2, 0.025), rgba=LIDAR_RGBA)
+            if hits is not None and not top:
+                add_points(scn, hits, z=z0 + 0.19, radius=self._w(2.2, 0.025), rgba=LIDAR_RGBA)
             for i in range(len(obs)):
                 if obs.ids[i] < 0:
                     continue
@@ -154,6 +165,9 @@ class Overlay:
         data = self.ep.world.data
         frame = self.renderer.render(data, self.camera, decorate=decorate)
         model, W, H = self.ep.world.model, self.renderer.width, self.renderer.height
+        if hits is not None and top:     # above every other overlay: drawn on the image (a third of the GL cost)
+            uv, _ = project(model, data, self.camera, np.column_stack([hits, np.full(len(hits), z0 + 0.19)]), W, H)
+            draw_dots(frame, uv, max(2.2, 0.025 / self.mpp), tuple(int(255 * c) for c in LIDAR_RGBA[:3]))
         self.last_labels = labels = []
         # track ids next to the tracks
         tracked = np.flatnonzero(obs.ids >= 0)
@@ -221,44 +235,80 @@ class Overlay:
 
 
 class EpisodeVideo:
-    """Attach to an Episode: ``with EpisodeVideo(ep, path) as v: ep.run()``."""
+    """Attach to an Episode: ``with EpisodeVideo(ep, path) as v: ep.run()``.
+
+    ``progress``: a progress line on stderr (:class:`bigcbf.progress.EpisodeProgress`: simulated time, frames,
+    wall time); None shows it only when stderr is a terminal. Interrupted (a KeyboardInterrupt: Ctrl-C, or
+    SIGTERM under the command line's handler), the ``with`` block, or :meth:`abort` called while the interrupt is
+    handled, keeps the frames so far as ``X.partial.mp4`` (:meth:`finish_partial`) and appends its path to the
+    exception's ``partial_videos`` list, so that the command line can say where it is."""
 
     def __init__(self, episode: Episode, path: str | Path, camera: str = "top", width: int = 640,
-                 height: int = 480, every: int = 1, title: str | None = None):
+                 height: int = 480, every: int = 1, title: str | None = None, progress: bool | None = None):
+        from .progress import EpisodeProgress
         self.ep = episode
         self.every = max(1, every)
         self.renderer = Renderer(episode.world.model, width, height)
         self.overlay = Overlay(episode, self.renderer, camera, title)
         fps = 1.0 / (episode.params.T_C_s * self.every)
         self.writer = VideoWriter(path, fps=fps)
+        self.progress = EpisodeProgress(episode.time_limit_s, f"video {Path(path).name}",
+                                        frames=lambda: self.writer.frames, enabled=progress)
         self._n = 0
         episode.observers.append(self)
 
     def __call__(self, rec: StepRecord) -> None:
         self.overlay.observe(rec)
         self._n += 1
-        if (self._n - 1) % self.every:
-            return
-        self.writer.write(self.overlay.frame(rec))
+        if (self._n - 1) % self.every == 0:
+            self.writer.write(self.overlay.frame(rec))
+        self.progress(rec)
 
     def close(self) -> None:
         """Finish the video (it appears at its path only now)."""
+        self.progress.update(self.progress.t, "encoding")
         try:
             self.writer.close()
         finally:
             self.renderer.close()
+            self.progress.close()
+
+    def finish_partial(self) -> Path | None:
+        """Keep the frames written so far as ``X.partial.mp4`` beside ``X.mp4`` (a video that plays; ``X.mp4`` is
+        left as it was, no temporary file remains): its path, or None without a frame to keep."""
+        try:
+            kept = self.writer.finish_partial()
+        finally:
+            self.renderer.close()
+        self.progress.close(f"interrupted, kept {kept.name}" if kept is not None else "interrupted")
+        return kept
 
     def abort(self) -> None:
-        """Drop the unfinished video (its path is left as it was)."""
+        """Drop the unfinished video (its path is left as it was); while a KeyboardInterrupt is handled, keep it
+        instead (class docstring)."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, KeyboardInterrupt):
+            self._keep_partial(exc)
+            return
         self.writer.abort()
         self.renderer.close()
+        self.progress.close("dropped")
+
+    def _keep_partial(self, exc: KeyboardInterrupt) -> None:
+        path = self.finish_partial()
+        if path is not None:
+            if not isinstance(getattr(exc, "partial_videos", None), list):
+                exc.partial_videos = []
+            exc.partial_videos.append(path)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, exc_type, *exc):
+    def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
             self.close()
+        elif isinstance(exc, KeyboardInterrupt):
+            self._keep_partial(exc)
         else:
             self.abort()
 

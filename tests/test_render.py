@@ -31,3 +31,56 @@ def test_video_is_h264_mp4(tmp_path):
     meta = next(reader)
     assert meta["codec"].startswith("h264") and "yuv420p" in meta["pix_fmt"]
     assert sum(1 for _ in reader) == 10
+
+
+def _count_frames(path):
+    import imageio_ffmpeg
+    reader = imageio_ffmpeg.read_frames(str(path))
+    next(reader)
+    return sum(1 for _ in reader)
+
+
+def test_an_interrupted_video_is_kept_as_a_partial_one(tmp_path):
+    import pytest
+    path = tmp_path / "v.mp4"
+    path.write_bytes(b"keep me")
+    with pytest.raises(KeyboardInterrupt):
+        with VideoWriter(path, fps=10) as vw:
+            for k in range(7):
+                vw.write(np.full((64, 96, 3), 30 * k, np.uint8))
+            raise KeyboardInterrupt
+    assert path.read_bytes() == b"keep me"                     # never in the final file's place
+    assert _count_frames(tmp_path / "v.partial.mp4") == 7      # a video that plays, every frame written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4", "v.partial.mp4"]
+    # nothing written, or another error than an interrupt: nothing kept, no temporary file
+    empty = VideoWriter(tmp_path / "e.mp4")
+    assert empty.finish_partial() is None
+    with pytest.raises(RuntimeError):
+        with VideoWriter(tmp_path / "f.mp4") as vw:
+            vw.write(np.zeros((64, 96, 3), np.uint8))
+            raise RuntimeError("boom")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4", "v.partial.mp4"]
+
+
+def test_an_interrupt_waits_for_the_frame_being_written():
+    """Ctrl-C inside imageio-ffmpeg's generator kills ffmpeg (the video is lost): a frame write is a section
+    that a SIGINT ends only when it is done, with Python's default handler in place too."""
+    import os
+    import signal
+    import time
+
+    import pytest
+
+    from bigcbf.sim.render import _whole_frame
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)      # as in a terminal (a test worker may
+    try:                                                                   # ignore SIGINT)
+        done = []
+        with pytest.raises(KeyboardInterrupt):
+            with _whole_frame():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)                 # the handler runs in here
+                done.append("frame written")
+        assert done == ["frame written"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)

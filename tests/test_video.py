@@ -1,6 +1,8 @@
 """Video overlays: the projection that places labels agrees with the renderer, and a frame shows what the legend
 names (the robot's trail, BIG-CBF's imagined paths with the selected one, the legend band), behavior labels
-that name what the cyan path is."""
+that name what the cyan path is, a progress line on a terminal."""
+import io
+
 import numpy as np
 import pytest
 
@@ -62,6 +64,30 @@ def test_a_frame_shows_the_trail_the_imagined_paths_and_the_legend():
     assert img is not None and int(img.available.sum()) >= 5                   # the six behaviors' paths drawn
 
 
+@pytest.mark.parametrize("camera", ["top", "track"])
+def test_lidar_hits_are_red_dots_where_they_are(camera):
+    """The top view draws the hits on the image (cheaper than a sphere each), the track view in the scene: either
+    way a red dot at each hit's place."""
+    ep = Episode(load_scenario("required_sidestepping", 0), "big-cbf", 0, SIMULATION, time_limit_s=4.0)
+    ep.begin()
+    for _ in range(20):
+        ep.act()
+    with Renderer(ep.world.model, 640, 480) as r:
+        overlay = Overlay(ep, r, camera)
+        rec = ep.act()
+        frame = overlay.frame(rec)[:480].astype(int)
+        hits = overlay._lidar_hits(rec)
+        z = TOP_VIEW_Z + 0.19 if camera == "top" else 0.19
+        uv, front = project(ep.world.model, ep.world.data, camera, np.column_stack([hits, np.full(len(hits), z)]),
+                            640, 480)
+    inside = front & (uv[:, 0] >= 0) & (uv[:, 0] < 640) & (uv[:, 1] >= 0) & (uv[:, 1] < 480)
+    assert len(hits) > 50 and inside.sum() > 30
+    red = (frame[..., 0] > 120) & (frame[..., 1] < 90) & (frame[..., 2] < 90)
+    near = [red[max(int(round(y)) - 1, 0):int(round(y)) + 2, max(int(round(x)) - 1, 0):int(round(x)) + 2].any()
+            for x, y in uv[inside]]
+    assert np.mean(near) > 0.75          # (the track view: a few behind the robot or the box)
+
+
 def _box_pixels(frame, box):
     x0, y0, x1, y1 = box
     return frame[max(y0, 0):y1, max(x0, 0):x1].astype(int)
@@ -109,3 +135,70 @@ def test_the_cyan_path_is_labelled_with_the_steps_mode(camera):
         ep.observers.append(observe)
         ep.run()
     assert len(checked) == 3 and checked[-1] == (8.6, "GOAL")
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_a_video_shows_its_progress_on_a_terminal_only(tmp_path, monkeypatch):
+    from bigcbf.video import EpisodeVideo
+    shown = {}
+    for name, stream in (("tty", _Terminal()), ("log", io.StringIO())):
+        monkeypatch.setattr("sys.stderr", stream)
+        ep = Episode(load_scenario("required_sidestepping", 0), "big-cbf", 0, SIMULATION, time_limit_s=1.0)
+        with EpisodeVideo(ep, tmp_path / f"{name}.mp4", width=160, height=120):
+            ep.run()
+        shown[name] = stream.getvalue()
+    assert shown["log"] == ""                            # nothing in logs or CI
+    lines = shown["tty"].split("\r")
+    assert len(lines) > 3 and shown["tty"].endswith("\n") and shown["tty"].count("\n") == 1
+    assert "video tty.mp4" in lines[-1] and "1.0/1.0 s simulated, 20 frames" in lines[-1]
+    assert any("encoding" in line for line in lines)
+
+
+def _frames(path):
+    import imageio_ffmpeg
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    return meta, sum(1 for _ in reader)
+
+
+def test_ctrl_c_keeps_a_partial_video_that_plays(tmp_path):
+    """`bigcbf run --video X.mp4` interrupted (SIGINT, as Ctrl-C sends it) keeps the frames so far as
+    X.partial.mp4, leaves X.mp4 as it was and no temporary file."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    out = tmp_path / "x.mp4"
+    out.write_bytes(b"an earlier video")
+    exe = Path(sys.executable).with_name("bigcbf")
+    env = dict(os.environ, MUJOCO_GL="egl")
+    # a child of a background job inherits an ignored SIGINT; a terminal's foreground process has the default
+    proc = subprocess.Popen([str(exe), "run", "required_sidestepping", "--video", str(out)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:      # frames being written: 1 s more
+            if any(p.stat().st_size > 50_000 for p in tmp_path.glob(".x.*")):
+                break
+            time.sleep(0.1)
+        time.sleep(1.0)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert out.read_bytes() == b"an earlier video"
+    partial = tmp_path / "x.partial.mp4"
+    meta, n = _frames(partial)
+    assert meta["codec"].startswith("h264") and n > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.mp4", "x.partial.mp4"]
