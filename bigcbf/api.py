@@ -117,7 +117,10 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
         time_limit_s = check_time_limit(time_limit_s, sc)
     resolve_method(method)
     cfg = load_config(config, profile)
-    from .outputs import check_output_file
+    from .outputs import check_distinct, check_output_file
+    as_path = lambda x: x if isinstance(x, (str, Path)) else None      # noqa: E731 -- a RunConfig is no file
+    check_distinct({"scenario": getattr(sc, "file", None) or None, "config": as_path(config), "profile": as_path(profile)},
+                   {"video": video, "log": log})
     for path, what in ((video, "video"), (log, "log")):
         if path is not None:             # before the episode: a path that cannot be written fails now
             check_output_file(path, what)
@@ -204,6 +207,8 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
             raise UserError("--split selects among the suite's scenarios; drop it when giving --scenarios")
     base = RunConfig(stack=s.params()) if s.params is not None else None
     cfg = load_config(config, profile, base=base, notes=notes)
+    from .bench.runner import check_bench_out
+    check_bench_out(out)              # before the suite writes its worlds there: a user's folder stays untouched
     entries = s.entries(out, split) if s.splits else s.entries(out)     # (a suite may write its scenario files)
     if scenario_list:
         # scenarios given by path that are files of the suite keep their split and family in the reports

@@ -389,10 +389,11 @@ def _pools(f: dict[str, Path]) -> dict[str, list[str]]:
 #: per subcommand: positional slots and options with the kind of value they take (None: a flag)
 CLI = {
     "scenarios": ([], {}),                 # its `generate` action: see command_lines
-    "methods": ([], {}),
+    "methods": ([], {"--json": None}),
     "run": (["scenario"], {"--method": "word", "--seed": "num", "--config": "file", "--profile": "file",
                            "--perception": "word", "--video": "out", "--camera": "word", "--log": "out",
-                           "--live": "num", "--json": None}),
+                           "--live": "num", "--json": None, "--robot-profile": "file", "--time-limit": "num",
+                           "--live-wait": "num"}),
     "demo": ([], {"--seed": "num", "--video": "out", "--no-video": None, "--manoeuvre": None}),
     "perf": ([], {"--json": None, "--quick": None, "--only": "word"}),
     "record": (["what"], {"--robot-profile": "file", "--out": "out", "--seed": "num", "--duration": "num",

@@ -40,6 +40,9 @@ def run(args) -> int:
     else:
         args.video = args.video or RENDERS / "demo_required_sidestep.mp4"
     if not args.no_video:
+        from ..outputs import check_distinct
+        from ..scenario import resolve_path
+        check_distinct({"scenario": resolve_path(DEMO_SCENARIO)}, {"--video": args.video})
         check_output_file(args.video, "video")
     return run_manoeuvre(args) if args.manoeuvre else run_sidestep(args)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .argtypes import nonneg_int, positive_float
+from .argtypes import nonneg_int, positive_float, robot_profile_arg
 
 HELP = ("make the stack's uncertainty profile of a simulated robot: record its calibration drive, calibrate it, "
         "write the profile run and bench use")
@@ -13,7 +13,7 @@ HELP = ("make the stack's uncertainty profile of a simulated robot: record its c
 def add_arguments(p):
     p.add_argument("what", choices=["simulate"],
                    help="simulate: record a calibration drive of the simulated robot and calibrate it")
-    p.add_argument("--robot-profile", default="x3_sim", metavar="NAME_OR_TOML",
+    p.add_argument("--robot-profile", type=robot_profile_arg, default="x3_sim", metavar="NAME|FILE",
                    help="the simulated robot: a shipped robot profile (x3_sim, the default; x3_hardware) or a TOML")
     p.add_argument("--out", type=Path, default=None, metavar="PATH.toml",
                    help="where to write (default for a shipped robot R: the package's profiles/stack/R.toml, the "
@@ -30,9 +30,9 @@ def add_arguments(p):
 def run(args) -> int:
     from ..errors import UserError
     from ..params.stack import PHYSICAL, SIMULATION, stack_profile_path
-    from ..scenario import profile_files, robot_profile_path
+    from ..scenario import profile_files
 
-    robot = robot_profile_path(args.robot_profile)
+    robot = args.robot_profile
     shipped = profile_files().get(robot.stem) == robot
     out = args.out
     if out is None:

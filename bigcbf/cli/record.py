@@ -1,7 +1,7 @@
 """bigcbf record: record a calibration drive in the simulator as a robot log (ROS 2 MCAP)."""
 from __future__ import annotations
 
-from .argtypes import nonneg_int, path_arg, positive_float
+from .argtypes import nonneg_int, path_arg, positive_float, robot_profile_arg
 
 #: the longest calibration drive (1 h of simulated driving, ~7 min of computing, ~200 MB of MCAP)
 MAX_DURATION_S = 3600.0
@@ -11,8 +11,9 @@ HELP = "record a calibration drive (steps, ramps, sweeps) of a simulated robot w
 
 def add_arguments(p):
     p.add_argument("what", choices=["calibration"], help="what to record (calibration: the calibration drive)")
-    p.add_argument("--robot-profile", type=path_arg, required=True, metavar="PROFILE.toml",
-                   help="the robot's imperfections (latency_s, latency_jitter_s, gain, bias, residual_max, "
+    p.add_argument("--robot-profile", type=robot_profile_arg, required=True, metavar="NAME|FILE",
+                   help="the simulated robot: a shipped robot profile (x3_sim, x3_hardware) or a .toml of its "
+                        "imperfections (latency_s, latency_jitter_s, gain, bias, residual_max, "
                         "residual_hold_s, floor_friction, wheel_speed_max_mps, wheel_accel_max_mps2, "
                         "wheel_yaw_lever_m); an empty file is the ideal robot")
     p.add_argument("--out", type=path_arg, required=True, metavar="PATH.mcap", help="the log to write")
