@@ -8,7 +8,7 @@ and the scenario (bigcbf/params/faults.py) reach it only through them: a scan th
 estimates in force, ageing (``obstacles_now``). Ground truth is used for
 the metrics (collision, clearance) and for the pedestrians' motion, and, only in the flagged ``truth`` perception
 mode, for the obstacle estimates. Success follows the paper: the robot's own state reaches the goal region
-(Eq. (5) on the controller's state x); the true distance to the goal at the end is reported too.
+(eq:goal_region (5) on the controller's state x); the true distance to the goal at the end is reported too.
 """
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ class EpisodeResult:
     #: min over the episode of the signed distance between the robot's collision outline and the nearest obstacle
     #: (sim/truth.py; < 0 is a penetration, which is a contact); +inf (JSON null) in a scene without obstacles
     min_clearance_m: float
-    e_cbf: float                  # Eq. (20)
+    e_cbf: float                  # eq:sim_cbf_energy (27)
     cbf_active_ratio: float
     qp_infeasible_ratio: float
     planner_p95_ms: float
@@ -79,9 +79,9 @@ class EpisodeResult:
     lateral_reversals: int = 0      # left/right reversals of the command's lateral component (every method)
     no_progress_s: float = 0.0      # time in 2 s windows that brought the robot < 0.1 m closer to the goal
     # the shared-uncertainty ablation's diagnostics (Sec. IV-C): E_CBF of the steps whose QP was infeasible, and the
-    # margins kappa_l m_i (Eq. 14) each layer used, mean and 90th percentile over the episode [m]: the imagination's
-    # over the selected rollout's steps and obstacles at each selection (BIG-CBF variants; NoShared: its fixed
-    # margin; None for methods without imagination), the execution layer's over the CBF rows at each control step
+    # margins kappa_l m_i (eq:shared_barrier (20)) each layer used, mean and 90th percentile over the episode [m]: the
+    # imagination's over the selected rollout's steps and obstacles at each selection (BIG-CBF variants; NoShared: its
+    # fixed margin; None for methods without imagination), the execution layer's over the CBF rows at each control step
     e_cbf_infeasible: float = 0.0
     m_img_mean_m: float | None = None
     m_img_p90_m: float | None = None
@@ -268,8 +268,8 @@ class Episode:
 
     def obstacles_now(self) -> Obstacles:
         """The estimates at the pending control tick, aged to now (``prediction.age_obstacles``: moved with their
-        velocity, Eq. (2) ``eq:obs_prop``; when scans went missing, the covariance grown beyond one scan period,
-        Eq. (3) ``eq:cov_prop``)."""
+        velocity, ``eq:obs_prop`` (2); when scans went missing, the covariance grown beyond one scan period,
+        ``eq:cov_prop`` (3))."""
         return age_obstacles(self._obstacles, self.world.t - self._scan_t, 1.0 / self.world.lidar.config.rate_hz,
                              self.params.uncertainty)
 

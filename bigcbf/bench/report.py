@@ -7,16 +7,16 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``min_clearance_m``: mean over episodes of the episode's minimum true clearance: the signed distance between the
   robot's collision outline (a 0.30 x 0.20 m rectangle at the true pose, ``bigcbf/sim/truth.py``) and the nearest
   obstacle's surface, negative for a penetration (not the paper's disc of radius r_R).
-- ``e_cbf``: mean over episodes of E_CBF, Eq. (20) (a per-episode sum, as in the paper).
+- ``e_cbf``: mean over episodes of E_CBF, eq:sim_cbf_energy (27) (a per-episode sum, as in the paper).
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
   over all control steps of all episodes of the group (the paper's "fraction of control steps").
 - ``cbf_active_episode_pct``: the mean over episodes of each episode's active ratio, x 100 (a long episode, e.g. a
   stalled timeout at 0 %, weighs as much as a short one; the pooled figure weighs episodes by their length).
 - ``e_cbf_infeasible_share_pct``: 100 x the E_CBF of control steps whose QP was infeasible / all E_CBF, summed over
   the group's episodes (``None`` when E_CBF is 0).
-- ``m_img_mean_m``, ``m_img_p90_m``, ``m_exec_mean_m``, ``m_exec_p90_m``: the margins kappa_l m_i (Eq. 14) of each
-  layer: the mean over episodes of each episode's mean and of each episode's 90th percentile (episode metrics of
-  the same names; the imagination's only for methods that imagine, ``None`` otherwise).
+- ``m_img_mean_m``, ``m_img_p90_m``, ``m_exec_mean_m``, ``m_exec_p90_m``: the margins kappa_l m_i
+  (eq:shared_barrier (20)) of each layer: the mean over episodes of each episode's mean and of each episode's 90th
+  percentile (episode metrics of the same names; the imagination's only for methods that imagine, ``None`` otherwise).
 - ``goal_error_m``: mean over the successful episodes of the true distance to the goal at the end (success is judged
   on the robot's own odometry, as in the paper; an odometry fault makes the two differ).
 - ``missed_scans``: mean over episodes of the LiDAR scans that never arrived (a scan-dropout fault).
@@ -262,8 +262,9 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                     ([display(m), str(s["ok"]), _f(s["success_pct"]), _f(s["time_s"]), _f(s["min_clearance_m"]),
                       _f(s["e_cbf"]), _f(s["cbf_active_pct"]), _f(s["qp_infeasible_pct"]), _f(s["collisions"]),
                       _f(s["planner_p95_ms"])] for m in methods for s in [per_m[m]]))
-    lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (Eq. (20)): means over episodes. Active, "
-              "QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time.", ""]
+    lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (eq:sim_cbf_energy (27)): means over "
+              "episodes. Active, QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall "
+              "time.", ""]
     lines += [f"{h}# Chatter and stall", ""]
     lines += _liveness_table(methods, [per_m[m] for m in methods], first="Method")
     lines += ["", LIVENESS_NOTE, ""]
@@ -275,10 +276,10 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                       f"{_f(s['m_img_mean_m'], 3)} / {_f(s['m_img_p90_m'], 3)}",
                       f"{_f(s['m_exec_mean_m'], 3)} / {_f(s['m_exec_p90_m'], 3)}"] for m in methods for s in [per_m[m]]))
     lines += ["", "Active, steps: share of all control steps (the paper's definition); episode mean: mean of the "
-              "episodes' ratios. m: the margin kappa_l m_i that each layer adds to r_R + r_i + d0 (Eq. 14), the mean "
-              "over episodes of the episode's mean / 90th percentile; imagination over the selected rollout's steps "
-              "and obstacles at each selection (NoShared: its fixed margin), execution over the CBF rows at each "
-              "control step.", ""]
+              "episodes' ratios. m: the margin kappa_l m_i that each layer adds to r_R + r_i + d0 "
+              "(eq:shared_barrier (20)), the mean over episodes of the episode's mean / 90th percentile; imagination "
+              "over the selected rollout's steps and obstacles at each selection (NoShared: its fixed margin), "
+              "execution over the CBF rows at each control step.", ""]
     fam = summary.get("by_family")
     if fam:     # procedural worlds and faults: the paper's tables are about its own scenes, not these
         lines += _fault_sections(summary, h) if summary.get("by_fault") else _family_sections(summary, h)
@@ -532,7 +533,7 @@ def plot_burden(summary: dict, path: Path) -> None:
     y = np.arange(len(methods))
     fig, axes = plt.subplots(1, 2, figsize=(10, 1.6 + 0.45 * len(methods)), dpi=150, sharey=True,
                              layout="constrained")
-    for ax, key, label in ((axes[0], "e_cbf", "mean $E_{CBF}$ per episode, Eq. (20)"),
+    for ax, key, label in ((axes[0], "e_cbf", "mean $E_{CBF}$ per episode, eq:sim_cbf_energy (27)"),
                            (axes[1], "cbf_active_pct", "CBF active (% of control steps)")):
         ours = np.array([np.nan if (v := summary["methods"][m][key]) is None else v for m in methods], float)
         ref = np.array([np.nan if (v := paper.get(m, {}).get(key)) is None else v for m in methods], float)

@@ -1,8 +1,9 @@
 """Constant-velocity Kalman filter over the state [px, py, vx, vy] (odom), batched over tracks.
 
 The paper (Sec. V) tracks obstacles "using constant-velocity Kalman filters"; its obstacle model (Sec. II) predicts
-positions with constant velocity, Eq. (2), and a growing covariance, Eq. (3). The filter's position covariance
-(the upper-left 2x2 block of P) is the Sigma_i handed to the stack, where Eq. (21) uses beta sqrt(lambda_max).
+positions with constant velocity, eq:obs_prop (2), and a growing covariance, eq:cov_prop (3). The filter's position
+covariance (the upper-left 2x2 block of P) is the Sigma_i handed to the stack, where eq:uncertainty_margin (21) uses
+beta sqrt(lambda_max).
 Process noise is the discretised continuous white-noise acceleration model (Bar-Shalom, Li & Kirubarajan 2001,
 Sec. 6.2.2) with power spectral density q [m^2/s^3].
 """
@@ -12,7 +13,8 @@ import numpy as np
 
 
 def cv_transition(dt: float) -> np.ndarray:
-    """F = [[I, dt I], [0, I]]: the constant-velocity motion of Eq. (2) (p_{k+1} = p_k + dt v_k, v_{k+1} = v_k)."""
+    """F = [[I, dt I], [0, I]]: the constant-velocity motion of eq:obs_prop (2)
+    (p_{k+1} = p_k + dt v_k, v_{k+1} = v_k)."""
     F = np.eye(4)
     F[0, 2] = F[1, 3] = dt
     return F
@@ -21,15 +23,15 @@ def cv_transition(dt: float) -> np.ndarray:
 def cv_process_noise(dt: float, q: float) -> np.ndarray:
     """Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]] (continuous white-noise acceleration, PSD q).
 
-    Its position block grows linearly in dt for small dt times the velocity variance, the role Eq. (3)'s
-    q_Sigma dt I_2 plays in the stack's own prediction.
+    Its position block grows linearly in dt for small dt times the velocity variance, the role
+    eq:cov_prop (3)'s q_Sigma dt I_2 plays in the stack's own prediction.
     """
     I = np.eye(2)
     return q * np.block([[dt ** 3 / 3 * I, dt ** 2 / 2 * I], [dt ** 2 / 2 * I, dt * I]])
 
 
 def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction over dt: x' = F x (Eq. (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
+    """Prediction over dt: x' = F x (eq:obs_prop (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
     F = cv_transition(dt)
     Q = cv_process_noise(dt, q)
     return x @ F.T, F @ P @ F.T + Q

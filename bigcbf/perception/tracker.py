@@ -134,7 +134,7 @@ class Tracker:
             setattr(self, name, np.concatenate([getattr(self, name), new[name]]))
 
     def predict(self, t: float) -> None:
-        """Propagate every track to time t (constant velocity, Eq. (2); covariance grows)."""
+        """Propagate every track to time t (constant velocity, eq:obs_prop (2); covariance grows)."""
         if self.t is not None and len(self) and t > self.t:
             self.x, self.P = kf_predict(self.x, self.P, t - self.t, self.params.accel_psd_m2ps3)
             self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)

@@ -1,14 +1,14 @@
 """The robot's firmware side: command latency and execution imperfections, wheel targets, wheel odometry, and the
 encoder and gyro models the odometry reads.
 
-No MuJoCo here. The hardware-imperfection layer realises paper Eq. (1) on the simulated robot: the body twist
-actually sent to the wheels is ``A u + d + r + s`` (A 3x3, bias d, bounded residual r, lateral slip s), applied
+No MuJoCo here. The hardware-imperfection layer realises the paper's eq:execution (1) on the simulated robot: the body
+twist actually sent to the wheels is ``A u + d + r + s`` (A 3x3, bias d, bounded residual r, lateral slip s), applied
 after a latency ``latency_s + U(0, latency_jitter_s)``; commands never overtake one another (a FIFO, like a serial
 link). The residual, the jitter and the slip each draw from their own random stream. Latency spikes (the robot
 profile's ``[faults.latency_spikes]``, ``bigcbf/params/faults.py``): the link stalls during each event, and a command
 issued then leaves when the stall ends (and then takes its latency).
 Then, when the profile has wheel limits, :class:`WheelLimiter` saturates the wheel speeds and limits their
-acceleration, as a base's firmware does (Eq. (1) holds only below those limits).
+acceleration, as a base's firmware does (eq:execution (1) holds only below those limits).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from .kinematics import MecanumKinematics
 
 
 class ImperfectionLayer:
-    """Eq. (1) plus latency: turns issued commands into executed body twists, in time order."""
+    """eq:execution (1) plus latency: turns issued commands into executed body twists, in time order."""
 
     def __init__(self, profile: RobotProfile, rng: np.random.Generator, rng_jitter: np.random.Generator | None = None,
                  rng_slip: np.random.Generator | None = None, lever_m: float | None = None,
@@ -54,7 +54,7 @@ class ImperfectionLayer:
         self.limiter = WheelLimiter(profile, lever_m) if profile.has_wheel_limits else None
 
     def executed_twist(self, t: float, u) -> np.ndarray:
-        """Eq. (1) (3-axis form): A u + d + r + s, r uniform in [-residual_max, residual_max], held
+        """eq:execution (1) (3-axis form): A u + d + r + s, r uniform in [-residual_max, residual_max], held
         residual_hold_s; s the lateral slip: sigma * ||u_xy|| across the commanded translation (to its left for
         sigma > 0), sigma uniform in [-slip_max, slip_max], held slip_hold_s."""
         u = np.asarray(u, float)
