@@ -10,8 +10,8 @@ points that 0.26-0.29 loaded on import), so a fresh interpreter finds ``bigcbf/N
 ``module:id`` form above, which imports this module first, or after ``import bigcbf.gym_env`` (optionally
 ``gym.register_envs(bigcbf.gym_env)``), which registers it. Each step is one control period T_C of
 :class:`bigcbf.episode.Episode`: the agent's action is the input command u_in, which goes through the same CBF-QP
-filter (Eq. (19)) as every method's, then the robot's firmware and the physics run up to the next control tick
-(scans and perception on the way, as in ``bigcbf run``). There is no second simulation loop: the environment
+filter (eq:hard_cbf_qp (26)) as every method's, then the robot's firmware and the physics run up to the next control
+tick (scans and perception on the way, as in ``bigcbf run``). There is no second simulation loop: the environment
 drives ``Episode.begin`` and ``Episode.act(u_in)``.
 
 - action: u_in = (vx [m/s], vy [m/s], wz [rad/s]), a body twist; ``action_space`` is the actuator box
@@ -28,7 +28,7 @@ drives ``Episode.begin`` and ``Episode.act(u_in)``.
   LiDAR differs (an observation space is fixed).
 - reward (the paper has none; a choice documented here, weights in :class:`RewardWeights`): the progress towards
   the goal over the step (true distance, m) minus ``cbf_weight`` times the step's CBF intervention
-  ||u_safe - u_in||^2_R (the term of E_CBF, Eq. (20)), plus ``success`` on reaching the goal region, minus
+  ||u_safe - u_in||^2_R (the term of E_CBF, eq:sim_cbf_energy (27)), plus ``success`` on reaching the goal region, minus
   ``collision`` on contact.
 - terminated: goal reached or collision; truncated: the scenario's time limit.
 - info: the episode's metrics so far (:class:`bigcbf.episode.EpisodeResult` without its wall-clock timings, which
@@ -70,7 +70,7 @@ FRAME_SIZE_PX = (16, 4096)
 @dataclass(frozen=True)
 class RewardWeights:
     progress_per_m: float = 1.0       # reward per metre of progress towards the goal
-    cbf_weight: float = 1.0           # penalty per unit of ||u_safe - u_in||^2_R (Eq. (20)) in a step
+    cbf_weight: float = 1.0           # penalty per unit of ||u_safe - u_in||^2_R (eq:sim_cbf_energy (27)) in a step
     success: float = 10.0             # on reaching the goal region
     collision: float = 10.0           # penalty on contact
 

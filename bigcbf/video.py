@@ -6,15 +6,15 @@ What a frame shows (the legend in a band below the scene names each item present
   whole-scene view) and its footprint r_R; in the track view the model itself and its footprint;
 - its trail (the true path so far, magenta);
 - LiDAR hits (red dots, placed with the robot's true pose);
-- tracked obstacles: their inflated radius D_i^exec of Eq. (14) (amber rings), their estimated body radius (thin
-  white), their track id (``#id``) and their velocity over 1 s (blue arrows, dynamic tracks); wall points as
-  small amber dots;
-- BIG-CBF's imagination (Eq. (9)): the six behaviors' imagined paths of the latest selection (grey when accepted
-  by Eq. (16), red when rejected) and the path the robot follows thick cyan (the selected behavior's, or the
-  fallback's release path), for other methods the path the method reports (cyan). The cyan path's end is labelled
-  with the step's behavior mode in cyan; in the track view the other behaviors' ends are labelled with their own
-  modes in grey, each only where it does not cover a label already drawn (the top view is crowded: the cyan one
-  only). ``Overlay.last_labels`` lists what the latest frame labelled, and where;
+- tracked obstacles: their inflated radius D_i^exec of eq:shared_barrier (20) (amber rings), their estimated body radius
+  (thin white), their track id (``#id``) and their velocity over 1 s (blue arrows, dynamic tracks); wall points
+  as small amber dots;
+- BIG-CBF's imagination (eq:behavior_rollout (12)): the six behaviors' imagined paths of the latest selection (grey
+  when accepted by eq:behavior_acceptance (22), red when rejected) and the path the robot follows thick cyan (the
+  selected behavior's, or the fallback's release path), for other methods the path the method reports (cyan). The cyan
+  path's end is labelled with the step's behavior mode in cyan; in the track view the other behaviors' ends are labelled
+  with their own modes in grey, each only where it does not cover a label already drawn (the top view is crowded: the
+  cyan one only). ``Overlay.last_labels`` lists what the latest frame labelled, and where;
 - the goal (green disc, in the scene).
 
 Text: method, time, behavior mode, speed, whether the CBF is active (and a red bar at the bottom while it is).
@@ -224,10 +224,12 @@ class Overlay:
 
     def legend(self, imagination: bool, path: bool) -> list[tuple[str, tuple, str]]:
         items = [("robot, trail", TRAIL_RGBA, "line"), ("LiDAR hits", LIDAR_RGBA, "dot"),
-                 ("track #id: D_i (Eq. 14)", D_RING_RGBA, "ring"), ("velocity (1 s)", VELOCITY_RGBA, "arrow"),
+                 ("track #id: D_i (eq:shared_barrier (20))", D_RING_RGBA, "ring"),
+                 ("velocity (1 s)", VELOCITY_RGBA, "arrow"),
                  ("wall points", WALL_POINT_RGBA, "dot")]
         if imagination:
-            items += [("imagined: selected", SELECTED_RGBA, "thick"), ("accepted (Eq. 16)", ACCEPTED_RGBA, "line"),
+            items += [("imagined: selected", SELECTED_RGBA, "thick"),
+                      ("accepted (eq:behavior_acceptance (22))", ACCEPTED_RGBA, "line"),
                       ("rejected", REJECTED_RGBA, "line")]
         elif path:
             items += [("planned path", SELECTED_RGBA, "thick")]

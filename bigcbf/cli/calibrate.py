@@ -1,4 +1,5 @@
-"""bigcbf calibrate: the shared-uncertainty terms of Eq. (15) (tau95, A, d, e_exec, e_ZOH) from a robot log."""
+"""bigcbf calibrate: the shared-uncertainty terms of eq:uncertainty_margin (21) (tau95, A, d, e_exec, e_ZOH) from a
+robot log."""
 from __future__ import annotations
 
 from .argtypes import float_in, path_arg, positive_float

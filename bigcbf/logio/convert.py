@@ -203,8 +203,8 @@ def _circle(xy, radius: float, z: float, n: int = 48) -> list[tuple[float, float
 
 
 def inflated_radius_markers(t: float, obs: Obstacles, D, frame_id: str = "odom") -> dict:
-    """The CBF's inflated radii D_i of Eq. (14) as visualization_msgs/MarkerArray: a DELETEALL, then per tracked
-    obstacle a LINE_STRIP circle of radius D_i (namespace ``D``, id = track id) and its track id as text
+    """The CBF's inflated radii D_i of eq:shared_barrier (20) as visualization_msgs/MarkerArray: a DELETEALL, then per
+    tracked obstacle a LINE_STRIP circle of radius D_i (namespace ``D``, id = track id) and its track id as text
     (namespace ``id``). Wall points (no track) are left out."""
     markers = [_marker(t, frame_id, "", 0, LINE_STRIP, action=DELETEALL)]
     D = np.asarray(D, float)
@@ -223,8 +223,9 @@ def inflated_radius_markers(t: float, obs: Obstacles, D, frame_id: str = "odom")
 
 def imagination_markers(t: float, modes, paths, accepted, selected: str | None, frame_id: str = "odom",
                         available=None) -> dict:
-    """BIG-CBF's imagined paths of one selection (Eq. (9)) as visualization_msgs/MarkerArray: a DELETEALL, then one
-    LINE_STRIP per available behavior (namespace = its name; selected cyan, accepted grey, rejected red)."""
+    """BIG-CBF's imagined paths of one selection (eq:behavior_rollout (12)) as visualization_msgs/MarkerArray: a
+    DELETEALL, then one LINE_STRIP per available behavior (namespace = its name; selected cyan, accepted grey, rejected
+    red)."""
     markers = [_marker(t, frame_id, "", 0, LINE_STRIP, action=DELETEALL)]
     for b, mode in enumerate(modes):
         if available is not None and not available[b]:

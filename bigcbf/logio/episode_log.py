@@ -10,7 +10,7 @@ the wheels' joint angles), /odom (the stack's state), /cmd_vel (u_safe), /cmd_ve
 behavior's imagined path, nav_msgs/Path) and, for BIG-CBF, /plan/candidates (the six imagined paths of the
 selection) whenever they change. At every new LiDAR scan: /scan, /tracked_obstacles
 (markers), /obstacles (the estimates with their covariances) and /cbf/inflated_radius (the D_i rings of
-Eq. (14) the filter used at that step). /odom and /imu carry the covariances of the robot profile's sensor
+eq:shared_barrier (20) the filter used at that step). /odom and /imu carry the covariances of the robot profile's sensor
 models (:mod:`bigcbf.logio.covariance`); /odom's are zero when the stack runs on the ground truth
 (``--perception truth``), as is /ground_truth/odom's.
 

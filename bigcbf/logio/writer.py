@@ -206,7 +206,7 @@ class LogWriter:
         self.write(topic, msgdefs.TRACKED_OBSTACLE_ARRAY, t, convert.tracked_obstacles_msg(t, obs, self.odom_frame))
 
     def inflated_radii(self, t: float, obs: Obstacles, D, topic: str = TOPIC_INFLATED) -> None:
-        """The CBF's D_i (Eq. (14)) as rings around the tracked obstacles, with their track ids."""
+        """The CBF's D_i (eq:shared_barrier (20)) as rings around the tracked obstacles, with their track ids."""
         self.write(topic, msgdefs.MARKER_ARRAY, t, convert.inflated_radius_markers(t, obs, D, self.odom_frame))
 
     def clock(self, t: float, topic: str = TOPIC_CLOCK) -> None:
