@@ -222,7 +222,7 @@ class Episode:
         w = self.world
         self._wall0 = time.perf_counter()
         self._spc = int(round(self.params.T_C_s / w.dt))                      # physics steps per control tick
-        self._sps = int(round(1.0 / w.lidar.config.rate_hz / w.dt))           # physics steps per scan
+        self._sps = w.lidar.config.steps_per_scan(w.dt)                       # physics steps per scan
         self._limit = int(round(self.time_limit_s / w.dt))
         self._k = 0
         self.metrics = EpisodeMetrics.for_params(self.params)     # every metric of the episode goes through it

@@ -50,6 +50,7 @@ import numpy as np
 
 from . import PROFILES, SCENARIOS
 from .errors import FieldError, UserError
+from .params.checks import REQUIRED, check_field_ranges, ranged
 from .params.faults import EventSchedule, PedestrianTurn
 from .params.robot import RobotProfile, merge_tables
 from .params.toml_io import from_dict, load_toml, parse_toml
@@ -113,10 +114,11 @@ class RobotSpec:
 class WallSpec:
     start: XY
     end: XY
-    thickness_m: float = 0.10
-    height_m: float = 0.60
+    thickness_m: float = ranged(0.10, 0, WORLD_LIMIT_M, lo_open=True)
+    height_m: float = ranged(0.60, MIN_OBSTACLE_HEIGHT_M, MAX_HEIGHT_M)
 
     def __post_init__(self):
+        check_field_ranges(self)
         if self.start == self.end:
             raise FieldError("end", "a wall needs distinct start and end points")
         _in_world("start", self.start)
@@ -128,11 +130,12 @@ class WallSpec:
 @dataclass(frozen=True)
 class BoxSpec:
     center: XY
-    half_size: XY
-    yaw_rad: float = 0.0
-    height_m: float = 0.60
+    half_size: XY = ranged(REQUIRED, 0, WORLD_LIMIT_M, lo_open=True)
+    yaw_rad: float = ranged(0.0, -100, 100)
+    height_m: float = ranged(0.60, MIN_OBSTACLE_HEIGHT_M, MAX_HEIGHT_M)
 
     def __post_init__(self):
+        check_field_ranges(self)
         _in_world("center", self.center)
         _sizes("half_size", *self.half_size)
         _height(self.height_m)
@@ -141,10 +144,11 @@ class BoxSpec:
 @dataclass(frozen=True)
 class CylinderSpec:
     center: XY
-    radius_m: float
-    height_m: float = 0.60
+    radius_m: float = ranged(REQUIRED, 0, WORLD_LIMIT_M, lo_open=True)
+    height_m: float = ranged(0.60, MIN_OBSTACLE_HEIGHT_M, MAX_HEIGHT_M)
 
     def __post_init__(self):
+        check_field_ranges(self)
         _in_world("center", self.center)
         _sizes("radius_m", self.radius_m)
         _height(self.height_m)
@@ -154,9 +158,9 @@ class CylinderSpec:
 class PedestrianSpec:
     name: str
     waypoints: tuple[XY, ...]                # the path, from its first point
-    speed_mps: float
-    start_time_s: float = 0.0                # stands at the first waypoint until then
-    radius_m: float = 0.25
+    speed_mps: float = ranged(REQUIRED, 0, 3, lo_open=True)
+    start_time_s: float = ranged(0.0, 0, MAX_TIME_LIMIT_S)  # stands at the first waypoint until then
+    radius_m: float = ranged(0.25, 0.1, 0.6)
     loop: bool = False                       # back to the first waypoint after the last (else stop there)
     reactive: bool = True                    # avoids the robot (social force); False: ignores it
     stop: EventSchedule = EventSchedule()   # sudden stops (bigcbf/params/faults.py); none by default
@@ -164,6 +168,7 @@ class PedestrianSpec:
 
     def __post_init__(self):
         check_name(self.name, "a pedestrian's")
+        check_field_ranges(self)
         if not 2 <= len(self.waypoints) <= MAX_WAYPOINTS:
             raise FieldError("waypoints", f"a pedestrian needs at least 2 waypoints (at most {MAX_WAYPOINTS})")
         _in_world("waypoints", *self.waypoints)
@@ -178,10 +183,11 @@ class PedestrianSpec:
 @dataclass(frozen=True)
 class FloorPatchSpec:
     center: XY
-    half_size: XY
-    friction: float
+    half_size: XY = ranged(REQUIRED, 0, WORLD_LIMIT_M, lo_open=True)
+    friction: float = ranged(REQUIRED, 0, 5, lo_open=True)
 
     def __post_init__(self):
+        check_field_ranges(self)
         if not (0 < self.friction <= 5):
             raise FieldError("friction", "must be in (0, 5]")
         _in_world("center", self.center)
@@ -193,9 +199,9 @@ class Scenario:
     """One scenario as drawn for one seed (the file's ranges resolved)."""
     name: str
     description: str
-    time_limit_s: float
+    time_limit_s: float = ranged(REQUIRED, 0, MAX_TIME_LIMIT_S, lo_open=True)
     robot: RobotSpec
-    extent_m: float = 6.0                    # half-size of the area shown in videos (m)
+    extent_m: float = ranged(6.0, 0, WORLD_LIMIT_M, lo_open=True)  # half-size of the area shown in videos (m)
     walls: tuple[WallSpec, ...] = ()
     boxes: tuple[BoxSpec, ...] = ()
     cylinders: tuple[CylinderSpec, ...] = ()
@@ -209,6 +215,7 @@ class Scenario:
 
     def __post_init__(self):
         check_name(self.name, "a scenario's")
+        check_field_ranges(self)
         if not 0 < self.time_limit_s <= MAX_TIME_LIMIT_S:
             raise FieldError("time_limit_s", f"must be in (0, {MAX_TIME_LIMIT_S:g}] s, got {self.time_limit_s:g}")
         if not 0 < self.extent_m <= WORLD_LIMIT_M:

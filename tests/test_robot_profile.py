@@ -61,7 +61,7 @@ def test_scenario_may_name_another_base_profile(tmp_path):
 
 @pytest.mark.parametrize("text, file_is_profile, field, words", [
     ("[lidar]\nbeams = 10\n", True, "lidar.beams", "unknown key"),
-    ("[imu]\ngyro_bias_max_radps = -1.0\n", True, "imu", ">= 0"),
+    ("[imu]\ngyro_bias_max_radps = -1.0\n", True, "imu.gyro_bias_max_radps", ">= 0"),
     ("[odometry]\nencoder_counts_per_rev = 1.5\n", True, "odometry.encoder_counts_per_rev", "integer"),
     ("slip_max = 2.0\n", True, None, "slip_max"),
 ])

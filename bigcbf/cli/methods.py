@@ -111,7 +111,9 @@ def toml_value(v) -> str:
 
 def parameter_rows(obj, prefix: str = "") -> list[dict]:
     """The fields of a params dataclass instance ``obj`` (its defaults: ``ParamsType()``), nested dataclasses
-    flattened to dotted keys: [{key, default (TOML text), value, unit, about}]."""
+    flattened to dotted keys: [{key, default (TOML text), value, unit, about, range}] (range: the documented range
+    a value must lie in, ``bigcbf.params.checks.ranged``, as text such as ``[2, 20000]``; '' when none)."""
+    from ..params.checks import field_range
     rows = []
     comments = field_comments(type(obj))
     for f in dataclasses.fields(obj):
@@ -123,19 +125,26 @@ def parameter_rows(obj, prefix: str = "") -> list[dict]:
         unit, about = split_unit(f.name, comments.get(f.name, ""))
         unit = str(f.metadata.get("unit", unit))          # field(metadata={"unit": ..., "doc": ...}) wins
         about = str(f.metadata.get("doc", about))
-        rows.append({"key": key, "default": toml_value(value), "value": value, "unit": unit, "about": about})
+        rng = field_range(f)
+        rows.append({"key": key, "default": toml_value(value), "value": value, "unit": unit, "about": about,
+                     "range": "" if rng is None else str(rng)})
     return rows
 
 
 def format_rows(rows: list[dict], indent: str = "    ") -> list[str]:
-    """One line a parameter: ``key = default  [unit]  what it is`` in aligned columns."""
+    """One line a parameter: ``key = default  [unit]  in RANGE  what it is`` in aligned columns."""
     if not rows:
         return []
     wk = max(len(r["key"]) for r in rows)
     wd = min(max(len(r["default"]) for r in rows), 24)     # a longer default (a matrix) pushes its own row only
     wu = max(len(r["unit"]) for r in rows) + 2
-    return [f"{indent}{r['key']:<{wk}} = {r['default']:<{wd}}  {'[' + r['unit'] + ']':<{wu}}  {r['about']}".rstrip()
-            for r in rows]
+    wr = max(len(r.get("range", "")) for r in rows)
+    wr = wr + 3 if wr else 0
+
+    def rng(r):
+        return f"{'in ' + r['range'] if r.get('range') else '':<{wr}}  " if wr else ""
+    return [f"{indent}{r['key']:<{wk}} = {r['default']:<{wd}}  {'[' + r['unit'] + ']':<{wu}}  {rng(r)}{r['about']}"
+            .rstrip() for r in rows]
 
 
 # --- one method -----------------------------------------------------------------------------------------------

@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import FieldError
+from .checks import check_field_ranges, ranged
 
 MAX_RATE_PER_S = 10.0          # events per second of a random schedule
 MAX_DURATION_S = 60.0          # length of one event [s]
@@ -55,11 +56,12 @@ class EventSchedule:
     """When an episodic fault happens: at ``times_s`` and at random at ``rate_per_s``; each event lasts
     ``duration_s`` (module docstring)."""
 
-    times_s: tuple[float, ...] = ()     # explicit event starts [s]
-    rate_per_s: float = 0.0             # Poisson rate of random events [1/s]
-    duration_s: float = 0.0             # length of each event [s]
+    times_s: tuple[float, ...] = ranged((), 0, MAX_EVENT_TIME_S)  # explicit event starts [s]
+    rate_per_s: float = ranged(0.0, 0, MAX_RATE_PER_S)  # Poisson rate of random events [1/s]
+    duration_s: float = ranged(0.0, 0, MAX_DURATION_S)  # length of each event [s]
 
     def __post_init__(self):
+        check_field_ranges(self)
         if len(self.times_s) > MAX_EVENTS:
             raise FieldError("times_s", f"at most {MAX_EVENTS} event times, got {len(self.times_s)}")
         if not all(0.0 <= t <= MAX_EVENT_TIME_S for t in self.times_s):
@@ -109,7 +111,7 @@ class PedestrianTurn(EventSchedule):
     counter-clockwise off the direction it was walking (180: it turns back), for ``duration_s``; with
     ``random_side`` each turn goes left or right at random (its own stream)."""
 
-    angle_deg: float = 180.0            # heading change, + counter-clockwise [deg]
+    angle_deg: float = ranged(180.0, -180, 180)  # heading change, + counter-clockwise [deg]
     random_side: bool = False
 
     def __post_init__(self):

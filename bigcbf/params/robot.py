@@ -69,6 +69,7 @@ import math
 from dataclasses import dataclass, field
 
 from .faults import RobotFaults
+from .checks import check_field_ranges, ranged
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
@@ -90,14 +91,15 @@ class LidarModel:
     (triangulation LiDARs lose accuracy with range). The defaults are the ideal sensor of the original model.
     """
 
-    n_beams: int = 360                  # beams per scan [-]
-    rate_hz: float = 10.0               # scan rate [Hz]
-    range_min_m: float = 0.12           # shorter returns are dropped [m]
-    range_max_m: float = 8.0            # longer returns are dropped [m]
-    range_noise_std_m: float = 0.0      # constant part of the range noise std [m]
-    range_noise_frac: float = 0.0       # part of the range noise std proportional to the range [-]
+    n_beams: int = ranged(360, 8, 8192)  # beams per scan [-]
+    rate_hz: float = ranged(10.0, 1, 100)  # scan rate [Hz]
+    range_min_m: float = ranged(0.12, 0, 10)  # shorter returns are dropped [m]
+    range_max_m: float = ranged(8.0, 0.1, 100)  # longer returns are dropped [m]
+    range_noise_std_m: float = ranged(0.0, 0, 1)  # constant part of the range noise std [m]
+    range_noise_frac: float = ranged(0.0, 0, 0.5)  # part of the range noise std proportional to the range [-]
 
     def __post_init__(self):
+        check_field_ranges(self)
         if self.n_beams < 1 or not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError("n_beams must be >= 1 and rate_hz > 0")
         if not (0 <= self.range_min_m < self.range_max_m and math.isfinite(self.range_max_m)):
@@ -117,11 +119,12 @@ class OdometryModel:
     odometry integrates random-walks with standard deviation density sqrt(t), whatever the integration step; wheel
     slip on the floor beyond the physics')."""
 
-    encoder_counts_per_rev: int = 0     # encoder counts per wheel revolution; 0 = exact wheel angles [-]
-    scale_error: float = 0.0            # odometry speeds are (1 + scale_error) x the wheels' true ones [-]
-    wheel_noise_density_radps_rthz: float = 0.0   # white noise on each wheel's measured speed [rad/s/sqrt(Hz)]
+    encoder_counts_per_rev: int = ranged(0, 0, 1000000)  # encoder counts per wheel revolution; 0 = exact wheel angles [-]
+    scale_error: float = ranged(0.0, -0.5, 0.5, lo_open=True, hi_open=True)  # odometry speeds are (1 + scale_error) x the wheels' true ones [-]
+    wheel_noise_density_radps_rthz: float = ranged(0.0, 0, 10)  # white noise on each wheel's measured speed [rad/s/sqrt(Hz)]
 
     def __post_init__(self):
+        check_field_ranges(self)
         if self.encoder_counts_per_rev < 0:
             raise ValueError("encoder_counts_per_rev must be >= 0")
         if not (math.isfinite(self.scale_error) and -0.5 < self.scale_error < 0.5):
@@ -138,11 +141,12 @@ class ImuModel:
     drifts at that rate) plus a draw once per episode, uniform in [-gyro_bias_max_radps, gyro_bias_max_radps]
     (what is left after the start-up calibration)."""
 
-    gyro_noise_density_radps_rthz: float = 0.0   # white rate-noise density [rad/s/sqrt(Hz)]
-    gyro_bias_max_radps: float = 0.0              # bound of the residual bias drawn per episode [rad/s]
-    gyro_bias_radps: float = 0.0                  # fixed bias [rad/s]
+    gyro_noise_density_radps_rthz: float = ranged(0.0, 0, 1)  # white rate-noise density [rad/s/sqrt(Hz)]
+    gyro_bias_max_radps: float = ranged(0.0, 0, 1)  # bound of the residual bias drawn per episode [rad/s]
+    gyro_bias_radps: float = ranged(0.0, -1, 1)  # fixed bias [rad/s]
 
     def __post_init__(self):
+        check_field_ranges(self)
         _nonneg(self, "gyro_noise_density_radps_rthz", "gyro_bias_max_radps")
         for name in ("gyro_noise_density_radps_rthz", "gyro_bias_max_radps"):
             if getattr(self, name) > 1.0:
@@ -155,24 +159,25 @@ class ImuModel:
 class RobotProfile:
     """Hardware imperfections and sensor models (keys documented in the module docstring and the README)."""
 
-    latency_s: float = 0.0
-    latency_jitter_s: float = 0.0
-    gain: Mat3 = IDENTITY3
-    bias: Vec3 = (0.0, 0.0, 0.0)
-    residual_max: Vec3 = (0.0, 0.0, 0.0)
-    residual_hold_s: float = 0.05
-    slip_max: float = 0.0               # lateral slip bound, fraction of ||u_xy|| [-]
-    slip_hold_s: float = 0.5            # the slip fraction is redrawn every slip_hold_s [s]
-    floor_friction: float | None = None
+    latency_s: float = ranged(0.0, 0, 2)
+    latency_jitter_s: float = ranged(0.0, 0, 1)
+    gain: Mat3 = ranged(IDENTITY3, -2, 2)
+    bias: Vec3 = ranged((0.0, 0.0, 0.0), -1, 1)
+    residual_max: Vec3 = ranged((0.0, 0.0, 0.0), 0, 1)
+    residual_hold_s: float = ranged(0.05, 0, 60, lo_open=True)
+    slip_max: float = ranged(0.0, 0, 1, hi_open=True)  # lateral slip bound, fraction of ||u_xy|| [-]
+    slip_hold_s: float = ranged(0.5, 0, 60, lo_open=True)  # the slip fraction is redrawn every slip_hold_s [s]
+    floor_friction: float | None = ranged(None, 0, 5, lo_open=True)
     lidar: LidarModel = field(default_factory=LidarModel)
     odometry: OdometryModel = field(default_factory=OdometryModel)
     imu: ImuModel = field(default_factory=ImuModel)
-    wheel_speed_max_mps: float | None = None
-    wheel_accel_max_mps2: float | None = None
-    wheel_yaw_lever_m: float | None = None
+    wheel_speed_max_mps: float | None = ranged(None, 0, 10, lo_open=True)
+    wheel_accel_max_mps2: float | None = ranged(None, 0, 100, lo_open=True)
+    wheel_yaw_lever_m: float | None = ranged(None, 0, 2, lo_open=True)
     faults: RobotFaults = field(default_factory=RobotFaults)
 
     def __post_init__(self):
+        check_field_ranges(self)
         if self.latency_s < 0 or self.latency_jitter_s < 0:
             raise ValueError("latency_s and latency_jitter_s must be >= 0")
         if any(x < 0 for x in self.residual_max):

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import FieldError
+from .checks import check_field_ranges, ranged
 from .robot import IDENTITY3, Mat3, Vec3
 from .toml_io import from_dict, load_toml, save, to_dict
 
@@ -68,18 +69,19 @@ class ExecutionModel:
     the perception-to-actuation delay: T_C + tau95 = 0.05 s + 0.10 s = 0.15 s in the simulation profile.
     """
 
-    A: Mat3 = IDENTITY3                                 # gain over (vx, vy, wz) [-]
-    d: Vec3 = (0.0, 0.0, 0.0)                           # bias (m/s, m/s, rad/s)
-    residual_speed_mps: tuple[float, ...] = (0.0, 0.8)  # knots of ||u_xy|| [m/s], increasing, first 0
-    residual_bound_mps: tuple[float, ...] = (0.02, 0.04)  # bound on ||r_xy|| at each knot [m/s]
-    residual_horizon_s: float = 0.15                    # see the class docstring [s]
-    residual_coverage: float = 0.95                     # stated coverage of the bound (informational) [-]
+    A: Mat3 = ranged(IDENTITY3, -5, 5)  # gain over (vx, vy, wz) [-]
+    d: Vec3 = ranged((0.0, 0.0, 0.0), -5, 5)  # bias (m/s, m/s, rad/s)
+    residual_speed_mps: tuple[float, ...] = ranged((0.0, 0.8), 0, 10)  # knots of ||u_xy|| [m/s], increasing, first 0
+    residual_bound_mps: tuple[float, ...] = ranged((0.02, 0.04), 0, 10)  # bound on ||r_xy|| at each knot [m/s]
+    residual_horizon_s: float = ranged(0.15, 0, 10)  # see the class docstring [s]
+    residual_coverage: float = ranged(0.95, 0, 1, lo_open=True)  # stated coverage of the bound (informational) [-]
     identified: tuple[bool, bool, bool] = (True, True, True)  # axes the calibration identified (informational)
-    wheel_speed_max_mps: float | None = None            # the robot's wheel rim-speed limit (informational) [m/s]
-    wheel_yaw_lever_m: float | None = None              # its yaw lever arm (informational) [m]
-    wheel_accel_max_mps2: float | None = None           # its wheel rim-acceleration limit (informational) [m/s^2]
+    wheel_speed_max_mps: float | None = ranged(None, 0, 100)  # the robot's wheel rim-speed limit (informational) [m/s]
+    wheel_yaw_lever_m: float | None = ranged(None, 0, 10)  # its yaw lever arm (informational) [m]
+    wheel_accel_max_mps2: float | None = ranged(None, 0, 1000)  # its wheel rim-acceleration limit (informational) [m/s^2]
 
     def __post_init__(self):
+        check_field_ranges(self)
         _finite("A", *(x for row in self.A for x in row))
         _finite("d", *self.d)
         ks, bs = self.residual_speed_mps, self.residual_bound_mps
@@ -107,12 +109,13 @@ class ExecutionModel:
 class Tau95Parts:
     """What tau95 is made of, as ``bigcbf calibrate`` measured it (informational; the stack uses tau95_s)."""
 
-    latency_s: float = 0.0              # command-to-wheel latency (largest over the axes of tau95) [s]
-    actuation_median_s: float = 0.0     # median half-way response delay of the clean command steps [s]
-    actuation95_s: float = 0.0          # their 95th percentile [s]
-    perception95_s: float = 0.0         # 95th percentile of the scan's age when a command is sent [s]
+    latency_s: float = ranged(0.0, 0, 60)  # command-to-wheel latency (largest over the axes of tau95) [s]
+    actuation_median_s: float = ranged(0.0, 0, 60)  # median half-way response delay of the clean command steps [s]
+    actuation95_s: float = ranged(0.0, 0, 60)  # their 95th percentile [s]
+    perception95_s: float = ranged(0.0, 0, 60)  # 95th percentile of the scan's age when a command is sent [s]
 
     def __post_init__(self):
+        check_field_ranges(self)
         _finite("tau95_parts", self.latency_s, self.actuation_median_s, self.actuation95_s, self.perception95_s)
 
 
@@ -130,20 +133,21 @@ class UncertaintyParams:
     dynamic scenes* and the full profile otherwise); None means "same as kappa_img".
     """
 
-    r_robot_m: float = 0.15            # robot footprint radius r_R [m]
-    d0_m: float = 0.10                 # base clearance d0 [m]
-    tau95_s: float = 0.10              # perception-to-actuation delay tau95 [s]
-    beta: float = 2.0                  # covariance scale beta [-]
-    e_zoh_m: float = 0.025             # sampled-data (zero-order-hold) displacement e_ZOH [m]
-    kappa_img: float = 1.0             # layer scaling of m_i in the imagination [-]
-    kappa_exec: float = 1.0            # layer scaling of m_i in the CBF filter [-]
-    kappa_img_static: float | None = None  # kappa_img when no dynamic obstacle is tracked [-]
-    q_sigma_m2_per_s: float = 0.01     # Eq. (3) covariance growth, dynamic obstacles [m^2/s]
-    q_sigma_static_m2_per_s: float = 0.0   # Eq. (3) covariance growth, static obstacles and wall points [m^2/s]
+    r_robot_m: float = ranged(0.15, 0, 5)  # robot footprint radius r_R [m]
+    d0_m: float = ranged(0.10, 0, 5)  # base clearance d0 [m]
+    tau95_s: float = ranged(0.10, 0, 10)  # perception-to-actuation delay tau95 [s]
+    beta: float = ranged(2.0, 0, 10)  # covariance scale beta [-]
+    e_zoh_m: float = ranged(0.025, 0, 5)  # sampled-data (zero-order-hold) displacement e_ZOH [m]
+    kappa_img: float = ranged(1.0, 0, 10)  # layer scaling of m_i in the imagination [-]
+    kappa_exec: float = ranged(1.0, 0, 10)  # layer scaling of m_i in the CBF filter [-]
+    kappa_img_static: float | None = ranged(None, 0, 10)  # kappa_img when no dynamic obstacle is tracked [-]
+    q_sigma_m2_per_s: float = ranged(0.01, 0, 100)  # Eq. (3) covariance growth, dynamic obstacles [m^2/s]
+    q_sigma_static_m2_per_s: float = ranged(0.0, 0, 100)  # Eq. (3) covariance growth, static obstacles and wall points [m^2/s]
     execution: ExecutionModel = field(default_factory=ExecutionModel)
     tau95_parts: Tau95Parts | None = None   # informational (written by bigcbf calibrate)
 
     def __post_init__(self):
+        check_field_ranges(self)
         vals = dict(r_robot_m=self.r_robot_m, d0_m=self.d0_m, tau95_s=self.tau95_s, beta=self.beta,
                     e_zoh_m=self.e_zoh_m, kappa_img=self.kappa_img, kappa_exec=self.kappa_exec,
                     q_sigma_m2_per_s=self.q_sigma_m2_per_s, q_sigma_static_m2_per_s=self.q_sigma_static_m2_per_s)
@@ -189,41 +193,42 @@ class StackParams:
       nominal limits v_b^max, selection on Eq. (16) alone, release by least barrier deficit.
     """
 
-    T_B_s: float = 0.5                  # behavior-selection period [s]
-    T_C_s: float = 0.05                 # execution / CBF period [s]
-    N: int = 15                         # imagination steps [-]
-    dt_s: float = 0.1                   # imagination step [s]
-    eps_g_m: float = 0.15               # goal tolerance [m]
-    v_freeze_mps: float = 0.05          # freeze threshold [m/s]
-    eps_h_m2: float = 0.10              # barrier-acceptance tolerance [m^2]
-    w_W: float = 1.0                    # weight of the CBF-compatibility surrogate W~
-    w_P: float = 1.5                    # weight of progress P [1/m]
-    w_F: float = 3.0                    # weight of freezing F
-    w_sw: float = 0.5                   # weight of switching C_sw
-    w_S: float = 0.05                   # weight of smoothness S [s^2/m^2]
-    alpha_per_s: float = 1.5            # CBF gain alpha [1/s]
-    w_eps: float = 1e-3                 # regularizer epsilon of Eq. (17) [m^2]
-    v_max_mps: float = 0.8              # translational speed limit (GOAL, PASS) [m/s]
-    v_side_mps: float = 0.55            # SIDE-L/R speed limit [m/s]
-    v_release_mps: float = 0.3          # reverse-release fallback speed [m/s]
-    release_range_m: float = 0.5        # obstacles within D0_i + this push the fallback [m]
-    d_pass_min_m: float = 0.30          # minimum lateral passing offset [m]
-    in_way_margin_m: float = 0.15       # an obstacle is in the way within r_R + r_i + d0 + this of the goal line [m]
-    relevant_range_m: float = 3.0       # look-ahead for the locally relevant obstacle [m]
-    u_min: Vec3 = (-0.8, -0.8, -1.0)    # actuator box, lower (m/s, m/s, rad/s)
-    u_max: Vec3 = (0.8, 0.8, 1.0)       # actuator box, upper (m/s, m/s, rad/s)
-    H_diag: Vec3 = (1.0, 1.0, 1.0)      # QP weight H of Eq. (19) (diagonal)
-    R_u_diag: Vec3 = (1.0, 1.0, 1.0)    # E_CBF weight R_u of Eq. (20) (diagonal)
-    dwell_s: float = 1.0                # minimum dwell time of a selected behavior [s]
-    switch_rel: float = 0.10            # relative switching-improvement threshold [-]
-    switch_abs: float = 0.05            # absolute part of the switching threshold [-]
-    noshared_margin_m: float = 0.30     # BIG-CBF-NoShared imagination margin [m]
-    max_obstacle_constraints: int = 12  # tracked obstacles in the CBF at most [-]
-    wall_sectors: int = 8               # bearing sectors for wall-point constraints [-]
+    T_B_s: float = ranged(0.5, 0.002, 60)  # behavior-selection period [s]
+    T_C_s: float = ranged(0.05, 0.002, 1)  # execution / CBF period [s]
+    N: int = ranged(15, 1, 500)  # imagination steps [-]
+    dt_s: float = ranged(0.1, 0.001, 1)  # imagination step [s]
+    eps_g_m: float = ranged(0.15, 0, 10, lo_open=True)  # goal tolerance [m]
+    v_freeze_mps: float = ranged(0.05, 0, 5)  # freeze threshold [m/s]
+    eps_h_m2: float = ranged(0.10, 0, 100)  # barrier-acceptance tolerance [m^2]
+    w_W: float = ranged(1.0, 0, 1000)  # weight of the CBF-compatibility surrogate W~
+    w_P: float = ranged(1.5, 0, 1000)  # weight of progress P [1/m]
+    w_F: float = ranged(3.0, 0, 1000)  # weight of freezing F
+    w_sw: float = ranged(0.5, 0, 1000)  # weight of switching C_sw
+    w_S: float = ranged(0.05, 0, 1000)  # weight of smoothness S [s^2/m^2]
+    alpha_per_s: float = ranged(1.5, 0, 1000, lo_open=True)  # CBF gain alpha [1/s]
+    w_eps: float = ranged(1e-3, 0, 1000, lo_open=True)  # regularizer epsilon of Eq. (17) [m^2]
+    v_max_mps: float = ranged(0.8, 0, 5, lo_open=True)  # translational speed limit (GOAL, PASS) [m/s]
+    v_side_mps: float = ranged(0.55, 0, 5, lo_open=True)  # SIDE-L/R speed limit [m/s]
+    v_release_mps: float = ranged(0.3, 0, 5, lo_open=True)  # reverse-release fallback speed [m/s]
+    release_range_m: float = ranged(0.5, 0, 10)  # obstacles within D0_i + this push the fallback [m]
+    d_pass_min_m: float = ranged(0.30, 0, 10)  # minimum lateral passing offset [m]
+    in_way_margin_m: float = ranged(0.15, 0, 10)  # an obstacle is in the way within r_R + r_i + d0 + this of the goal line [m]
+    relevant_range_m: float = ranged(3.0, 0, 100)  # look-ahead for the locally relevant obstacle [m]
+    u_min: Vec3 = ranged((-0.8, -0.8, -1.0), -10, 0)  # actuator box, lower (m/s, m/s, rad/s)
+    u_max: Vec3 = ranged((0.8, 0.8, 1.0), 0, 10)  # actuator box, upper (m/s, m/s, rad/s)
+    H_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0, lo_open=True)  # QP weight H of Eq. (19) (diagonal)
+    R_u_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0)  # E_CBF weight R_u of Eq. (20) (diagonal)
+    dwell_s: float = ranged(1.0, 0, 60)  # minimum dwell time of a selected behavior [s]
+    switch_rel: float = ranged(0.10, 0, 100)  # relative switching-improvement threshold [-]
+    switch_abs: float = ranged(0.05, 0, 1000)  # absolute part of the switching threshold [-]
+    noshared_margin_m: float = ranged(0.30, 0, 10)  # BIG-CBF-NoShared imagination margin [m]
+    max_obstacle_constraints: int = ranged(12, 0, 1000)  # tracked obstacles in the CBF at most [-]
+    wall_sectors: int = ranged(8, 0, 360)  # bearing sectors for wall-point constraints [-]
     speed_governor: bool = False        # opt-in: BIG-CBF's policies move at the speed the CBF admits (governor.py)
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):
+        check_field_ranges(self)
         pos = dict(T_B_s=self.T_B_s, T_C_s=self.T_C_s, dt_s=self.dt_s, eps_g_m=self.eps_g_m,
                    alpha_per_s=self.alpha_per_s, w_eps=self.w_eps, v_max_mps=self.v_max_mps,
                    v_side_mps=self.v_side_mps, v_release_mps=self.v_release_mps)

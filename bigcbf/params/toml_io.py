@@ -2,7 +2,11 @@
 
 Supported field types: float, int, bool, str, tuples of floats (fixed or variable length), tuples of
 tuples of floats (matrices), Optional of these, and nested frozen dataclasses (TOML tables).
-Unknown keys are errors; missing keys take the dataclass default (which is documented in the class).
+Unknown keys are errors; missing keys take the dataclass default (which is documented in the class). A field
+declared with a documented range (``bigcbf.params.checks.ranged``) is checked against it here, for every dataclass
+alike: a value outside is a UserError naming the file and the field. Files are read with a size cap
+(:data:`MAX_TOML_BYTES`): at most that many bytes plus one are ever read, so a device or a huge file is refused at
+once.
 """
 from __future__ import annotations
 
@@ -18,6 +22,7 @@ from typing import Any, TypeVar
 import tomli_w
 
 from ..errors import FieldError, UserError
+from .checks import range_violation
 
 T = TypeVar("T")
 
@@ -99,6 +104,9 @@ def from_dict(cls: type[T], data: dict, *, file: str | None = None, prefix: str 
         if key not in fields:
             raise UserError(f"unknown key (known: {', '.join(sorted(fields))})", file=file, field=name)
         kwargs[key] = _convert(hints[key], value, file, name)
+        problem = range_violation(fields[key], kwargs[key])      # the field's documented range (checks.ranged)
+        if problem is not None:
+            raise UserError(problem, file=file, field=name)
     for key, f in fields.items():
         if key not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             raise UserError("missing key", file=file, field=f"{prefix}.{key}" if prefix else key)
@@ -133,7 +141,11 @@ def _depth(node, limit: int) -> int:
 
 
 def parse_toml(text: str, file: str | None = None) -> dict:
-    """Parse TOML text; a syntax error or too deep a nesting is a UserError naming ``file``."""
+    """Parse TOML text; a syntax error, too deep a nesting or a text longer than :data:`MAX_TOML_BYTES` is a
+    UserError naming ``file``."""
+    if len(text) > MAX_TOML_BYTES:
+        raise UserError(f"larger than the {MAX_TOML_BYTES:,} bytes a TOML file may have; is it the right file?",
+                        file=file)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -145,12 +157,27 @@ def parse_toml(text: str, file: str | None = None) -> dict:
     return data
 
 
+#: largest parameter, scenario or configuration file read [bytes] (1 MiB; the largest shipped one is ~4 KiB, a
+#: generated world of 1000 walls ~100 KiB)
+MAX_TOML_BYTES = 1 << 20
+
+
+def read_capped(path: str | Path, cap: int, what: str = "file") -> bytes:
+    """The bytes of ``path``, reading at most ``cap`` + 1 of them: a longer file (or an endless device such as
+    /dev/zero) is a UserError naming it, after reading no more than that. OSErrors propagate."""
+    with open(path, "rb") as fh:
+        raw = fh.read(cap + 1)
+    if len(raw) > cap:
+        raise UserError(f"larger than the {cap:,} bytes a {what} may have; is it the right file?", file=str(path))
+    return raw
+
+
 def load_toml(path: str | Path) -> dict:
-    """Read a TOML file (UTF-8, as TOML requires); a missing, unreadable, binary or malformed file is a UserError
-    naming it."""
+    """Read a TOML file (UTF-8, as TOML requires; at most :data:`MAX_TOML_BYTES`); a missing, unreadable, binary,
+    too large or malformed file is a UserError naming it."""
     p = Path(path)
     try:
-        raw = p.read_bytes()
+        raw = read_capped(p, MAX_TOML_BYTES, "TOML file")
     except FileNotFoundError:
         raise UserError("file not found", file=str(p)) from None
     except IsADirectoryError:

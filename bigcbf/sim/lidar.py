@@ -20,6 +20,12 @@ class LidarConfig(LidarModel):
 
     site: str = "lidar"
 
+    def steps_per_scan(self, dt: float) -> int:
+        """Physics steps of ``dt`` seconds between two scans: 1 / rate_hz rounded, at least 1 (the documented rate
+        range, at most 100 Hz, keeps it >= 5 at the 2 ms physics step; a scan period below one step is one step,
+        never a division by zero)."""
+        return max(1, int(round(1.0 / (self.rate_hz * dt))))
+
     @classmethod
     def from_model(cls, model: LidarModel, site: str = "lidar") -> "LidarConfig":
         return cls(**{f.name: getattr(model, f.name) for f in fields(LidarModel)}, site=site)

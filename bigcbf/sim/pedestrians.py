@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..params.checks import check_ranges
+from ..params.checks import check_ranges, ranged
 from ..params.faults import EventSchedule, PedestrianTurn
 from .faults import EventProcess
 
@@ -37,13 +37,13 @@ FAULT_STREAM_KEY = 1000
 
 @dataclass(frozen=True)
 class SocialForceParams:
-    tau_s: float = 0.5             # relaxation time to the preferred velocity
-    A_mps2: float = 2.0            # pedestrian-pedestrian interaction strength
-    B_m: float = 0.3               # interaction range
-    A_robot_mps2: float = 1.0      # pedestrian-robot strength (reactive pedestrians only)
-    anisotropy: float = 0.35       # lambda: weight of interactions from behind
-    waypoint_tol_m: float = 0.15
-    max_speed_factor: float = 1.3
+    tau_s: float = ranged(0.5, 0, 10, lo_open=True)  # relaxation time to the preferred velocity
+    A_mps2: float = ranged(2.0, 0, 100)  # pedestrian-pedestrian interaction strength
+    B_m: float = ranged(0.3, 0, 10, lo_open=True)  # interaction range
+    A_robot_mps2: float = ranged(1.0, 0, 100)  # pedestrian-robot strength (reactive pedestrians only)
+    anisotropy: float = ranged(0.35, 0, 1)  # lambda: weight of interactions from behind
+    waypoint_tol_m: float = ranged(0.15, 0, 10, lo_open=True)
+    max_speed_factor: float = ranged(1.3, 0, 10, lo_open=True)
 
     def __post_init__(self):
         check_ranges(self, positive=("tau_s", "B_m", "waypoint_tol_m", "max_speed_factor"),

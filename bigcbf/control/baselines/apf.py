@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...params.checks import check_ranges
+from ...params.checks import check_ranges, ranged
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo, fail_safe
@@ -40,13 +40,13 @@ class ApfParams:
     """k_att 1 1/s with a 0.8 m conic radius: full speed 0.8 m/s beyond 0.8 m from the goal.
     k_rep 0.01 m^3/s and rho_0 0.6 m: 0.19 m/s push at 0.3 m from the obstacle's surface, 0.83 m/s at 0.2 m."""
 
-    k_att_per_s: float = 1.0          # attractive gain [1/s]
-    d_conic_m: float = 0.8            # quadratic -> conic switch distance [m]
-    k_rep_m3_per_s: float = 0.01      # repulsive gain [m^3/s]
-    rho0_m: float = 0.6               # influence distance beyond the inflated radius [m]
-    rho_min_m: float = 0.02           # floor of rho in the gradient [m]
-    lookahead_s: float = 0.0          # where the prediction places dynamic obstacles [s]
-    margin_m: float = 0.0             # safety margin beyond r_R + r_i (module docstring) [m]
+    k_att_per_s: float = ranged(1.0, 0, 100)  # attractive gain [1/s]
+    d_conic_m: float = ranged(0.8, 0, 100, lo_open=True)  # quadratic -> conic switch distance [m]
+    k_rep_m3_per_s: float = ranged(0.01, 0, 100)  # repulsive gain [m^3/s]
+    rho0_m: float = ranged(0.6, 0, 100, lo_open=True)  # influence distance beyond the inflated radius [m]
+    rho_min_m: float = ranged(0.02, 0, 10, lo_open=True)  # floor of rho in the gradient [m]
+    lookahead_s: float = ranged(0.0, 0, 10)  # where the prediction places dynamic obstacles [s]
+    margin_m: float = ranged(0.0, 0, 2)  # safety margin beyond r_R + r_i (module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("d_conic_m", "rho0_m", "rho_min_m"),

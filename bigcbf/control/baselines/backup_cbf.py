@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...params.checks import check_ranges
+from ...params.checks import check_ranges, ranged
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..kernels import execution_velocity
@@ -43,9 +43,9 @@ from .shield import ShieldPlanner, one_step, rollout
 
 @dataclass(frozen=True)
 class BackupCbfParams:
-    a_brake_mps2: float = 2.0                                  # braking deceleration of the backup [m/s^2]
-    margin_m: float = 0.0                                      # the method's own safety margin (docstring) [m]
-    blends: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)    # lambda grid, increasing, from 0 to 1 [-]
+    a_brake_mps2: float = ranged(2.0, 0, 50, lo_open=True)  # braking deceleration of the backup [m/s^2]
+    margin_m: float = ranged(0.0, 0, 2)  # the method's own safety margin (docstring) [m]
+    blends: tuple[float, ...] = ranged((0.0, 0.25, 0.5, 0.75, 1.0), 0, 1)  # lambda grid, increasing, from 0 to 1 [-]
 
     def __post_init__(self):
         check_ranges(self, positive=("a_brake_mps2",))

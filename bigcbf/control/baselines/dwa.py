@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...params.checks import check_ranges
+from ...params.checks import check_ranges, ranged
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..planner import PlanInfo, fail_safe
@@ -46,17 +46,17 @@ from .common import Geometry, at_goal, clip_command, integrate, predict, surface
 class DwaParams:
     """Dynamic-window sampling and objective weights (Fox et al. give the form; values chosen here)."""
 
-    acc_xy_mps2: float = 2.0          # translational acceleration limit [m/s^2]
-    acc_wz_radps2: float = 3.0        # yaw acceleration limit [rad/s^2]
-    window_s: float = 0.25            # interval defining the reachable window [s]
-    n_xy: int = 9                     # grid points per translational axis [-]
-    n_wz: int = 1                     # grid points in yaw rate [-] (1: wz = 0, see the module docstring)
-    w_heading: float = 1.0            # weight of goal progress [-]
-    w_clearance: float = 0.3          # weight of clearance [-]
-    w_velocity: float = 0.1           # weight of speed [-]
-    w_yaw: float = 0.1                # penalty on |wz| / wz_max [-]
-    clearance_cap_m: float = 1.0      # clearance beyond this does not count [m]
-    margin_m: float = 0.0             # the method's own safety margin beyond r_R + r_i (module docstring) [m]
+    acc_xy_mps2: float = ranged(2.0, 0, 50, lo_open=True)  # translational acceleration limit [m/s^2]
+    acc_wz_radps2: float = ranged(3.0, 0, 100)  # yaw acceleration limit [rad/s^2]
+    window_s: float = ranged(0.25, 0, 10, lo_open=True)  # interval defining the reachable window [s]
+    n_xy: int = ranged(9, 1, 101)  # grid points per translational axis [-]
+    n_wz: int = ranged(1, 1, 101)  # grid points in yaw rate [-] (1: wz = 0, see the module docstring)
+    w_heading: float = ranged(1.0, 0, 1000000.0)  # weight of goal progress [-]
+    w_clearance: float = ranged(0.3, 0, 1000000.0)  # weight of clearance [-]
+    w_velocity: float = ranged(0.1, 0, 1000000.0)  # weight of speed [-]
+    w_yaw: float = ranged(0.1, 0, 1000000.0)  # penalty on |wz| / wz_max [-]
+    clearance_cap_m: float = ranged(1.0, 0, 100, lo_open=True)  # clearance beyond this does not count [m]
+    margin_m: float = ranged(0.0, 0, 2)  # the method's own safety margin beyond r_R + r_i (module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("acc_xy_mps2", "window_s", "clearance_cap_m"),

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...params.checks import check_ranges
+from ...params.checks import check_ranges, ranged
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..jit import kernel
@@ -54,18 +54,18 @@ _TINY = 1e-12
 class MppiParams:
     """MPPI sampling and cost (Williams et al. give the algorithm; the paper the rate, horizon and counts)."""
 
-    samples: int = 512                # sampled sequences per update [-]
-    iterations: int = 2               # sampling updates per planning cycle [-]
-    sigma_mps: float = 0.35           # exploration noise std per axis [m/s]
-    gamma: float = 0.1                # control-cost weight gamma [cost units]
-    ess_fraction: float = 0.1         # target effective sample size of the weights, fraction of samples [-]
-    w_goal: float = 2.0               # running goal-distance cost [1/s]
-    w_term: float = 10.0              # terminal goal-distance cost [1/m]
-    w_coll: float = 200.0             # running penalty while inside an inflated radius [1/s]
-    w_clear: float = 2.0              # running clearance cost [1/s]
-    l_clear_m: float = 0.15           # clearance cost length scale [m]
-    w_smooth: float = 0.05            # smoothness weight [s^2/m^2]
-    margin_m: float = 0.10            # collision margin beyond r_R + r_i (Nav2 MPPI's default; module docstring) [m]
+    samples: int = ranged(512, 2, 20000)  # sampled sequences per update [-]
+    iterations: int = ranged(2, 1, 100)  # sampling updates per planning cycle [-]
+    sigma_mps: float = ranged(0.35, 0, 5, lo_open=True)  # exploration noise std per axis [m/s]
+    gamma: float = ranged(0.1, 0, 1000000.0, lo_open=True)  # control-cost weight gamma [cost units]
+    ess_fraction: float = ranged(0.1, 0, 1, lo_open=True)  # target effective sample size of the weights, fraction of samples [-]
+    w_goal: float = ranged(2.0, 0, 1000000.0)  # running goal-distance cost [1/s]
+    w_term: float = ranged(10.0, 0, 1000000.0)  # terminal goal-distance cost [1/m]
+    w_coll: float = ranged(200.0, 0, 1000000.0)  # running penalty while inside an inflated radius [1/s]
+    w_clear: float = ranged(2.0, 0, 1000000.0)  # running clearance cost [1/s]
+    l_clear_m: float = ranged(0.15, 0, 10, lo_open=True)  # clearance cost length scale [m]
+    w_smooth: float = ranged(0.05, 0, 1000000.0)  # smoothness weight [s^2/m^2]
+    margin_m: float = ranged(0.10, 0, 2)  # collision margin beyond r_R + r_i (Nav2 MPPI's default; module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("sigma_mps", "gamma", "ess_fraction", "l_clear_m"),

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...params.checks import check_ranges
+from ...params.checks import check_ranges, ranged
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import goal_basis, release_velocity
@@ -45,12 +45,12 @@ from .shield import ShieldPlanner, one_step, rollout
 
 @dataclass(frozen=True)
 class PlCbfParams:
-    n_dir: int = 8                 # directional policies [-]
-    v_dir_mps: float = 0.5         # speed of a directional policy [m/s]
-    t_move_s: float = 1.0          # how long a directional policy moves before stopping [s]
-    a_max_mps2: float = 2.0        # acceleration limit of the rollouts [m/s^2]
-    radius_scale: float = 1.01 ** 0.5   # D_i = radius_scale (r_R + r_i): safe_control's beta = 1.01 on D^2 [-]
-    margin_m: float = 0.0          # additive safety margin [m]
+    n_dir: int = ranged(8, 1, 360)  # directional policies [-]
+    v_dir_mps: float = ranged(0.5, 0, 5, lo_open=True)  # speed of a directional policy [m/s]
+    t_move_s: float = ranged(1.0, 0, 60, lo_open=True)  # how long a directional policy moves before stopping [s]
+    a_max_mps2: float = ranged(2.0, 0, 50, lo_open=True)  # acceleration limit of the rollouts [m/s^2]
+    radius_scale: float = ranged(1.01 ** 0.5, 1, 10)  # D_i = radius_scale (r_R + r_i): safe_control's beta = 1.01 on D^2 [-]
+    margin_m: float = ranged(0.0, 0, 2)  # additive safety margin [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("v_dir_mps", "t_move_s", "a_max_mps2"), min_int={"n_dir": 1})
