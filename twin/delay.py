@@ -1,4 +1,5 @@
-"""The perception-to-actuation delay tau95 of Eq. (15), from a log of commands, odometry and (optionally) scans.
+"""The perception-to-actuation delay tau95 of eq:uncertainty_margin (21), from a log of commands, odometry and
+(optionally) scans.
 
 Three measurements, all on the log's clock (the odometry on the time base of twin.timebase); scan header stamps
 are used only when they are on the log's clock:
@@ -23,9 +24,9 @@ are used only when they are on the log's clock:
 
 tau95 is the 95th percentile of (actuation delay + perception latency), the two taken as independent: every
 per-edge delay is paired with every latency. The actuation delays are those of the translational axes (vx, vy)
-when they have at least ``min_edges`` clean edges: Eq. (15) multiplies tau95 by a translational relative velocity,
-and a slower yaw response (a filtered gyro, a yaw-rate ramp) is not a delay of the robot's translation; otherwise
-those of every identified axis.
+when they have at least ``min_edges`` clean edges: eq:uncertainty_margin (21) multiplies tau95 by a translational
+relative velocity, and a slower yaw response (a filtered gyro, a yaw-rate ramp) is not a delay of the robot's
+translation; otherwise those of every identified axis.
 """
 from __future__ import annotations
 
@@ -215,9 +216,9 @@ def perception_latency(t_cmd, t_scan, stamp_scan, clock: str = "auto",
 
 
 def tau95(actuation_s, perception_s, q: float = 0.95) -> float:
-    """tau95 of Eq. (15): the q-quantile (``quantile_upper``) of actuation delay + perception latency, with every
-    actuation sample paired with every latency sample (independent sources). No latency samples: the quantile of
-    the actuation delays alone."""
+    """tau95 of eq:uncertainty_margin (21): the q-quantile (``quantile_upper``) of actuation delay + perception latency,
+    with every actuation sample paired with every latency sample (independent sources). No latency samples: the quantile
+    of the actuation delays alone."""
     a = np.asarray(actuation_s, float).ravel()
     p = np.asarray(perception_s, float).ravel()
     if len(p) == 0:

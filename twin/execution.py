@@ -1,4 +1,4 @@
-"""The execution model of Eq. (1), v = A u + d + r, identified from delay-aligned commands and odometry.
+"""The execution model eq:execution (1), v = A u + d + r, identified from delay-aligned commands and odometry.
 
 Samples are the odometry messages; each is paired with the command in force one actuation delay earlier.
 
@@ -8,11 +8,11 @@ Samples are the odometry messages; each is paired with the command in force one 
   and the identified rows get no coefficient on it (the log holds no information about them). Never guessed.
 - A and d by least squares: for each identified output axis j, v_j = sum_k A_jk u_k + d_j over the identified
   inputs k (scipy.linalg.lstsq), on the *settled* samples: those whose command (delay-aligned) has been held,
-  within ``hold_tol`` per axis, for at least ``settle_s``. Eq. (1) is a static map; right after a command
+  within ``hold_tol`` per axis, for at least ``settle_s``. eq:execution (1) is a static map; right after a command
   change the velocity is still on its way (the wheels' acceleration is limited, more so in combined motions),
   and fitting those samples would bias the gains low. The residual bound uses the same settled samples (see
-  twin.calibrate: right after a change the error is the delay's, which Eq. (15)'s relative-motion delay term
-  covers); the coverage on every held-out sample, transients included, is reported beside it. Fewer than
+  twin.calibrate: right after a change the error is the delay's, which eq:uncertainty_margin (21)'s relative-motion
+  delay term covers); the coverage on every held-out sample, transients included, is reported beside it. Fewer than
   ``min_settled`` settled samples (a log from a planner whose command never rests): all samples are used, with
   a note.
 - Saturated samples are left out: where the drive could not realise the command (a wheel at its limit), the
@@ -56,7 +56,7 @@ class ExecutionFit:
     settled_only: bool         # False when too few settled samples and every sample was used
 
     def predict(self, u: np.ndarray) -> np.ndarray:
-        """Eq. (1) without the residual: A u + d for commands u (n, 3)."""
+        """eq:execution (1) without the residual: A u + d for commands u (n, 3)."""
         return np.asarray(u, float) @ self.A.T + self.d
 
 
@@ -96,7 +96,7 @@ def input_condition(u: np.ndarray, axes: np.ndarray) -> float:
 
 
 def least_squares(u: np.ndarray, v: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (1): A, d minimising sum ||v - (A u + d)||^2 over the identified axes (identity rows elsewhere)."""
+    """eq:execution (1): A, d minimising sum ||v - (A u + d)||^2 over the identified axes (identity rows elsewhere)."""
     A, d = np.eye(3), np.zeros(3)
     idx = np.flatnonzero(axes)
     if len(idx) == 0 or len(u) <= len(idx):          # nothing to fit, or fewer samples than unknowns per row
@@ -142,7 +142,7 @@ def saturated_samples(t: np.ndarray, u: np.ndarray, v: np.ndarray, A: np.ndarray
 
 def fit_execution(t: np.ndarray, u: np.ndarray, v: np.ndarray, opt: ExecutionOptions = ExecutionOptions(),
                   axes: np.ndarray | None = None, settled: np.ndarray | None = None) -> ExecutionFit:
-    """Identify A, d of Eq. (1) from aligned commands u (n, 3) and measured body twists v (n, 3) at times t.
+    """Identify A, d of eq:execution (1) from aligned commands u (n, 3) and measured body twists v (n, 3) at times t.
 
     ``settled`` (n,) marks the samples the least squares may use (default: all)."""
     u = np.asarray(u, float)

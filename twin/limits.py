@@ -1,10 +1,11 @@
-"""The saturating execution model: Eq. (1) below the robot's wheel limits, and what the firmware does above them.
+"""The saturating execution model: eq:execution (1) below the robot's wheel limits, and what the firmware does
+above them.
 
-Every real base's firmware limits its wheels. A linear model v = A u + d (Eq. (1), eq:execution) fitted across a
+Every real base's firmware limits its wheels. A linear model v = A u + d (eq:execution (1)) fitted across a
 limit absorbs it into A and d (a gain that reads low, a bias that predicts motion at rest, cross gains of the wrong
 sign), so the limits are identified with the model they break, and A, d on the samples below them:
 
-    p(t) = A u(t - L) + d                          Eq. (1) without the residual, inputs delayed per axis (L_j)
+    p(t) = A u(t - L) + d                          eq:execution (1) without residual, inputs delayed per axis (L_j)
     s(t) = p(t) min(1, v_max / max|R p(t)|)        wheel-speed saturation, all wheels scaled together
     x'   = the step toward s limited so that max|R dx| <= a_max dt     wheel-acceleration limit
     y'   = (x - y) / T                              the drive's first-order response
@@ -536,7 +537,7 @@ def _predict(t_cmd, u_cmd, t, v, axes, static: StaticFit, dyn: DynamicFit, h: fl
 def settled_by_model(y: np.ndarray, target: np.ndarray, axes: np.ndarray,
                      tol: tuple[float, float, float] = (0.02, 0.02, 0.04), rel: float = 0.03) -> np.ndarray:
     """True where the model's response is within max(tol_j, rel |target_j|) of its target on every identified
-    axis (the dynamics have caught up: Eq. (1) is a static map and holds there)."""
+    axis (the dynamics have caught up: eq:execution (1) is a static map and holds there)."""
     lim = np.maximum(np.asarray(tol, float)[None, :], rel * np.abs(target))
     ok = np.abs(y - target) <= lim
     return np.all(ok[:, np.asarray(axes, bool)], axis=1)

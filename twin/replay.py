@@ -392,7 +392,7 @@ def why_worse(j: int, cal, nominal: ReplayRun, calibrated: ReplayRun) -> str:
     if ra and ra["saturating"][j] >= ra["nominal"][j]:
         reasons.append(f"even open loop the calibrated model does not predict {AXES[j]} better than v = u "
                        f"({ra['saturating'][j]:.3f} vs {ra['nominal'][j]:.3f}): the log's {AXES[j]} does not follow "
-                       "its command as Eq. (1) and a wheel limit describe")
+                       "its command as eq:execution (1) and a wheel limit describe")
     elif ra:
         reasons.append(f"open loop the calibrated model predicts {AXES[j]} better ({ra['saturating'][j]:.3f} vs "
                        f"nominal {ra['nominal'][j]:.3f}); replayed through the MuJoCo model it does not: the "

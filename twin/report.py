@@ -9,16 +9,16 @@ panel.
   paper's ``eq:uncertainty_margin`` and ``eq:execution``), in plain words, the figures with what each shows, what
   was left out, and calibrate's notes;
 - ``command_response.png``: per identified axis, the command (as sent, and delayed by the dead time) against the
-  measured velocity, Eq. (1) (A u + d) and the saturating model (limits, dead time, lag), over a 20-s excerpt with
-  the most command activity; saturated samples marked;
+  measured velocity, eq:execution (1) (A u + d) and the saturating model (limits, dead time, lag), over a 20-s excerpt
+  with the most command activity; saturated samples marked;
 - ``delay.png``: per identified axis, the change-correlation curve with its peak, its bootstrap interval and a
   near tie marked, and (where the log has clean command steps) the per-edge delay histogram; the perception latency
   histogram and the actuation delays behind tau95 (where there are any), with tau95 marked;
 - ``residuals.png``: ||r_xy|| against the command speed ||u_xy|| with the bound behind e_exec(u) and its stated and
   measured coverage, and per identified axis the residual r_j against the command u_j with the per-axis 95 % bound;
   samples in the bound (settled, unsaturated) in colour, transients in grey, saturated samples in red;
-- ``limits.png`` (with an execution model): the fastest wheel's rim speed measured against what Eq. (1) asks for
-  (max|R (A u + d)|), with the identified rim-speed limit: below it the points follow the diagonal, above it they
+- ``limits.png`` (with an execution model): the fastest wheel's rim speed measured against what eq:execution (1) asks
+  for (max|R (A u + d)|), with the identified rim-speed limit: below it the points follow the diagonal, above it they
   stay at the limit;
 - ``calibration.json``: the numbers (as ``--json``).
 """
@@ -130,7 +130,7 @@ def figures(cal: Calibration, cmd_t: np.ndarray | None = None,
                 label=f"command delayed by the dead time ({model.dynamic.latency_s[j] * 1e3:.0f} ms)"
                 if model is not None else "command")
         ax.plot(t[sel] - t[0], v[sel, j], color="tab:orange", lw=1.2, label="measured (odometry)")
-        ax.plot(t[sel] - t[0], lin[sel, j], color="tab:green", lw=0.8, ls="--", label="Eq. (1): A u + d")
+        ax.plot(t[sel] - t[0], lin[sel, j], color="tab:green", lw=0.8, ls="--", label="eq:execution (1): A u + d")
         if model is not None:
             ok = sel & scored
             ax.plot(t[ok] - t[0], model.y[ok, j], color="tab:purple", lw=1.0, ls=":",
@@ -234,7 +234,7 @@ def figures(cal: Calibration, cmd_t: np.ndarray | None = None,
                label="transients (response not settled): not in the bound")
     if sat.any():
         ax.scatter(a["speed"][sat], a["resid"][sat], s=4, alpha=0.5, color="tab:red",
-                   label="saturated: Eq. (1) does not hold, not in the bound")
+                   label="saturated: eq:execution (1) does not hold, not in the bound")
     ax.scatter(a["speed"][use & ~held], a["resid"][use & ~held], s=4, alpha=0.35, color="tab:blue",
                label="calibration blocks")
     ax.scatter(a["speed"][use & held], a["resid"][use & held], s=4, alpha=0.5, color="tab:orange",
@@ -282,7 +282,7 @@ def figures(cal: Calibration, cmd_t: np.ndarray | None = None,
         if sat.any():
             ax.scatter(dem[sat], meas[sat], s=5, alpha=0.5, color="tab:red", label="saturated")
         top = float(max(dem.max(), meas.max())) * 1.05
-        ax.plot([0, top], [0, top], color="k", lw=1, ls="--", label="Eq. (1): measured = asked")
+        ax.plot([0, top], [0, top], color="k", lw=1, ls="--", label="eq:execution (1): measured = asked")
         if st.v_max is not None:
             ax.axhline(st.v_max, color="tab:red", lw=1.5, label=f"rim-speed limit {st.v_max:.3f} m/s")
             title = (f"Wheel-speed limit {st.v_max:.3f} m/s (yaw lever {st.lever_m:.3f} m"
@@ -330,7 +330,7 @@ def index_page(cal: Calibration, files: list[str], not_ident: list[str], left_ou
              f"Identified axes: {', '.join(ident)}." + (" " + "; ".join(not_ident) + "." if not_ident else ""),
              "", "## What the calibration found", "",
              "These are the robot-dependent terms of the paper's shared uncertainty radius, `eq:uncertainty_margin` "
-             "(Eq. (15) in this project's numbering, see `bigcbf/control/__init__.py`):",
+             "(21):",
              "m_i = ||R(theta)(A u + d) - v_i|| tau95 + beta sqrt(lambda_max(Sigma_i)) + e_exec(u) + e_ZOH, "
              "the distance [m] by which the robot's and an obstacle's relative position may be off. "
              "`bigcbf run --profile` reads them from the profile `calibrate --out` writes.", "",
@@ -341,7 +341,7 @@ def index_page(cal: Calibration, files: list[str], not_ident: list[str], left_ou
              f"{pt.latency_s:.3f} s, actuation p95 {pt.actuation95_s:.3f} s, perception p95 {pt.perception95_s:.3f} s "
              f"({d.perception_source}). |",
              f"| A | {' '.join(mat(f.A[j]) for j in range(3))} | - (rows vx, vy, wz) | the gain of the execution "
-             "model `eq:execution` (Eq. (1)), v_real = R(theta)(A u + d + r): what the robot realises of a "
+             "model `eq:execution` (1), v_real = R(theta)(A u + d + r): what the robot realises of a "
              "command u; A = I is a perfect robot. An axis not identified keeps its identity row. |",
              f"| d | {mat(f.d)} | m/s, m/s, rad/s | the constant bias of `eq:execution`: motion the robot adds to "
              "every command. |",
@@ -361,15 +361,15 @@ def index_page(cal: Calibration, files: list[str], not_ident: list[str], left_ou
                   + "; " + (f"acceleration {dyn.accel_max:.2f} m/s^2" if dyn.accel_max is not None
                             else "no acceleration limit seen") + "."]
     desc = {"command_response.png": "the command (as sent and delayed by the dead time) against the measured "
-                                    "velocity, Eq. (1) and the saturating model, per identified axis, over the 20 s "
-                                    "with the most command activity",
+                                    "velocity, eq:execution (1) and the saturating model, per identified axis, "
+                                    "over the 20 s with the most command activity",
             "delay.png": "how the delays were measured: per identified axis the correlation of command and response "
                          "changes (its peak is the delay), the per-edge delays where the log has clean command "
                          "steps, and the perception latency and actuation delays behind tau95",
             "residuals.png": "the execution residual ||r_xy|| against the command speed with the bound behind "
                              "e_exec, and per identified axis the residual against its command",
-            "limits.png": "the fastest wheel's rim speed measured against what Eq. (1) asks, with the identified "
-                          "rim-speed limit",
+            "limits.png": "the fastest wheel's rim speed measured against what eq:execution (1) asks, with the "
+                          "identified rim-speed limit",
             "calibration.json": "every number (as `bigcbf calibrate --json`)"}
     lines += ["", "## Files", ""] + [f"- [{name}]({name}): {desc.get(name, '')}" for name in files]
     if not_ident or left_out:

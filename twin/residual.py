@@ -1,4 +1,4 @@
-"""The command-dependent residual bound behind e_exec(u) of Eq. (15), with a stated coverage.
+"""The command-dependent residual bound behind e_exec(u) of eq:uncertainty_margin (21), with a stated coverage.
 
 Residual r_xy = measured (vx, vy) - the model's (A u + d)_xy, against the commanded speed s = ||u_xy||.
 
@@ -103,8 +103,8 @@ def _bin_of(s: np.ndarray, edges: np.ndarray) -> np.ndarray:
 
 
 def fit_bound(speed: np.ndarray, resid: np.ndarray, opt: ResidualOptions = ResidualOptions()):
-    """(speed_knots, bound_knots) of the residual bound behind e_exec(u) of Eq. (15), from calibration samples
-    (module docstring)."""
+    """(speed_knots, bound_knots) of the residual bound behind e_exec(u) of eq:uncertainty_margin (21), from calibration
+    samples (module docstring)."""
     speed = np.asarray(speed, float)
     resid = np.asarray(resid, float)
     edges = speed_bins(speed, opt)
@@ -120,8 +120,8 @@ def fit_bound(speed: np.ndarray, resid: np.ndarray, opt: ResidualOptions = Resid
 
 
 def calibrate_bound(t, speed, resid, opt: ResidualOptions = ResidualOptions(), held=None) -> ResidualBound:
-    """The residual bound of e_exec(u), Eq. (15), from the calibration blocks, and its coverage on both parts
-    (``held``: the held-out mask, default :func:`holdout_mask`)."""
+    """The residual bound of e_exec(u), eq:uncertainty_margin (21), from the calibration blocks, and its coverage on
+    both parts (``held``: the held-out mask, default :func:`holdout_mask`)."""
     held = holdout_mask(t, opt) if held is None else np.asarray(held, bool)
     speed, resid = np.asarray(speed, float), np.asarray(resid, float)
     cal = ~held

@@ -12,8 +12,8 @@ the hardware preset), as in the paper, where e_ZOH is a listed parameter. A ``[p
 made it: the robot profile file and its sha256, seed, drive duration, code version (git commit, the bigcbf
 package's code fingerprint), date; ``load_stack_params`` ignores that table.
 
-Equations: tau95, A, d and e_exec(u) are the terms of Eq. (15) [eq:uncertainty_margin] and of Eq. (1)
-[eq:execution]; see twin.calibrate for how each is estimated.
+Equations: tau95, A, d and e_exec(u) are the terms of eq:uncertainty_margin (21) and of eq:execution (1); see
+twin.calibrate for how each is estimated.
 """
 from __future__ import annotations
 
