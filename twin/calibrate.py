@@ -331,6 +331,10 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     u0 = zoh(cmd.t, cmd.u, t - delay.xcorr_s)
     held = holdout_mask(t, opt.residual)
     settled0 = settled_samples(cmd.t, cmd.u, t - delay.xcorr_s, opt.execution)
+    if not (settled0 & ~held).any():
+        raise UserError("no odometry sample in the calibration blocks follows a held command long enough to settle: "
+                        f"the commands on {cmd.topic} change faster than the robot can follow (or their order is "
+                        "scrambled)", file=path)
     nb = max(6, int(round((t[-1] - t[0]) / opt.block_s)))
     block = np.minimum(((t - t[0]) / max(t[-1] - t[0], 1e-9) * nb).astype(int), nb - 1)
     model = fit_model(cmd.t, cmd.u, t, v, axes, ~held, block, u0, settled0, opt.limits,
@@ -442,7 +446,38 @@ def read_log(path: str | Path, cmd_topic: str | None = None, odom_topic: str | N
         c = find_topic(log, CMD, cmd_topic)
         o = find_topic(log, ODOM, odom_topic)
         s = find_topic(log, SCAN, scan_topic, required=scan_topic is not None) if use_scan else None
-        return read_series(log, cmd=c, odom=o, scan=s)
+        data = read_series(log, cmd=c, odom=o, scan=s)
+        if log.format == "mcap" and not log.recovered and data.cmd is not None:
+            data = _commands_in_file_order(data, log.path, c)
+        return data
+
+
+def _commands_in_file_order(data: LogData, path: Path, topic: str) -> LogData:
+    """The commands checked against the order of the messages in the MCAP file (twin.timebase, Order): the reader
+    sorts on the log time, which scrambles a topic whose log times were permuted."""
+    import dataclasses
+
+    from mcap.reader import make_reader
+
+    from .timebase import command_order
+    try:
+        with open(path, "rb") as fh:
+            rows = [(m.log_time, m.publish_time, m.sequence)
+                    for _, _, m in make_reader(fh).iter_messages(topics=[topic], log_time_order=False)]
+    except Exception:            # noqa: BLE001 - the reader read it; a file this one cannot index keeps its order
+        return data
+    a = np.array(rows, np.int64).reshape(-1, 3)
+    how, note = command_order(a[:, 0], a[:, 1], a[:, 2], topic, str(data.path))
+    if how == "as is":
+        return data
+    cmd = data.cmd
+    if how == "file order":
+        if len(a) != len(cmd.t):      # the reader dropped messages (NaN): the file's order no longer maps onto them
+            raise UserError(f"{topic}: its log times go back in the file's order and some messages were dropped; "
+                            "the true order cannot be restored", file=str(data.path), field=topic)
+        rank = np.argsort(np.argsort(a[:, 0], kind="stable"), kind="stable")   # each file message's place by time
+        cmd = dataclasses.replace(cmd, t=np.sort(cmd.t), u=cmd.u[rank])
+    return dataclasses.replace(data, cmd=cmd, warnings=list(data.warnings) + [note])
 
 
 def calibrate_log(path: str | Path, cmd_topic: str | None = None, odom_topic: str | None = None,
