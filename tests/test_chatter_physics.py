@@ -125,8 +125,9 @@ def test_slow_walker_corridor_counts_match_an_independent_recount(tmp_path):
 def test_a_post_field_that_made_big_cbf_flip_sides_is_crossed_with_at_most_one_reversal(tmp_path):
     """Generated world posts_00003 (dev split; `bigcbf scenarios generate posts --seed 3`): staggered rows of round
     posts. Without the liveness option (speed governor, viability test, release outlook; issue 13) BIG-CBF entered a gap, had every candidate
-    rejected by Eq. (16) short of its narrowest point, fell back to REVERSE and tried again, switching sides 14
-    times, until the time limit. Now it must cross with at most one left/right reversal and no collision."""
+    rejected by eq:behavior_acceptance (22) short of its narrowest point, fell back to REVERSE and tried again,
+    switching sides 14 times, until the time limit. Now it must cross with at most one left/right reversal and no
+    collision."""
     from bigcbf.api import run_episode
     from bigcbf.worlds import generate
     f = tmp_path / "posts_00003.toml"

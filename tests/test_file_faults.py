@@ -252,7 +252,7 @@ def test_a_missing_scan_leaves_the_estimates_ageing_and_nothing_crashes(tmp_path
     base, later = recs[0.9].obstacles, recs[1.5].obstacles                   # 0.9 s: age 0; 1.5 s: age 0.6 s
     assert len(base) > 0 and np.array_equal(base.ids, later.ids)
     np.testing.assert_allclose(later.p, base.p + 0.6 * base.v, atol=1e-9)
-    grow = q_sigma_for(base, SIMULATION.uncertainty) * (0.6 - 0.1)           # Eq. (3) beyond one scan period
+    grow = q_sigma_for(base, SIMULATION.uncertainty) * (0.6 - 0.1)           # eq:cov_prop (3) beyond one scan period
     np.testing.assert_allclose(later.cov, base.cov + grow[:, None, None] * np.eye(2), atol=1e-12)
     assert recs[2.0].scan.stamp == pytest.approx(2.0)                        # scans again
     # without the fault, the same episode misses nothing, and its estimates are never older than one scan

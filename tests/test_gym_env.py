@@ -50,7 +50,7 @@ def test_env_steps_are_the_episode_loop_with_the_agents_u_in():
 
 def test_reward_is_progress_minus_cbf_intervention():
     """With only the progress term, the rewards add up to the distance gained; the CBF term is the sum of
-    ||u_safe - u_in||^2 (E_CBF of Eq. (20) with R = I) over the steps."""
+    ||u_safe - u_in||^2 (E_CBF of eq:sim_cbf_energy (27) with R = I) over the steps."""
     env = NavigationEnv("required_sidestepping", time_limit_s=6.0,
                         reward=RewardWeights(progress_per_m=1.0, cbf_weight=0.0, success=0.0, collision=0.0))
     env.reset(seed=0)

@@ -154,7 +154,7 @@ def test_a_video_shows_its_progress_on_a_terminal_only(tmp_path, monkeypatch):
     assert shown["log"] == ""                            # nothing in logs or CI
     lines = shown["tty"].split("\r")
     assert len(lines) > 3 and shown["tty"].endswith("\n") and shown["tty"].count("\n") == 1
-    assert "video tty.mp4" in lines[-1] and "1.0/1.0 s simulated, 20 frames" in lines[-1]
+    assert "video tty.mp4" in lines[-1] and "100%" in lines[-1] and "1.0/1.0 s simulated, 20 frames" in lines[-1]
     assert any("encoding" in line for line in lines)
 
 

@@ -140,7 +140,7 @@ def test_accel_limited_and_brake_rollout_by_hand():
                  predict(Obstacles.empty(), P, 6, 0.1), P, 2.0)
     np.testing.assert_allclose(ro.p[0, :, 0], [0.0, 0.06, 0.10, 0.12, 0.12, 0.12, 0.12], atol=1e-12)
     assert ro.h_min[0] == np.inf
-    # with an execution gain the state is the realized velocity and commands go through Eq. (1) once:
+    # with an execution gain the state is the realized velocity and commands go through eq:execution (1) once:
     # A_xx = 0.5, bias 0.1 m/s; commanding 1.0 m/s asks for 0.5 * 1.0 + 0.1 = 0.6 m/s, which the robot already
     # does: it keeps 0.6 m/s (positions 0.06 k), and commanding 0 asks for the bias 0.1 m/s
     import dataclasses

@@ -1,4 +1,5 @@
-"""Eqs. (5)-(8): goal basis, behavior subgoals with the locally relevant obstacle, bounded feedback; fallback."""
+"""eq:online_behavior_command (8) to eq:behavior_feedback (11): goal basis, behavior subgoals with the locally
+relevant obstacle, bounded feedback; fallback."""
 import math
 
 import numpy as np
@@ -22,7 +23,7 @@ def test_goal_basis_eq_6():
 
 
 def literal_eq8(e, vmax):
-    """Eq. (8) exactly as printed: sat_vmax[ e/||e|| min(vmax, 2||e||) + 0.35 e ]."""
+    """eq:behavior_feedback (11) exactly as printed: sat_vmax[ e/||e|| min(vmax, 2||e||) + 0.35 e ]."""
     e = np.asarray(e, float)
     n = np.linalg.norm(e)
     if n == 0:

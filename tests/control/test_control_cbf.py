@@ -1,4 +1,5 @@
-"""The hard CBF filter, Eqs. (18)-(19): hand values, and property tests against a brute-force exact solver."""
+"""The hard CBF filter, eq:cbf_condition (25) and eq:hard_cbf_qp (26): hand values, and property tests against a
+brute-force exact solver."""
 import dataclasses
 import itertools
 import math
@@ -18,7 +19,7 @@ LO, HI = np.array(P.u_min), np.array(P.u_max)
 
 
 def eq18(state, obs, u, D, params):
-    """Eq. (18) evaluated literally: 2 q_i^T [R(theta)(A u + d) - v_i] + alpha h_i, per obstacle."""
+    """eq:cbf_condition (25) evaluated literally: 2 q_i^T [R(theta)(A u + d) - v_i] + alpha h_i, per obstacle."""
     ex = params.uncertainty.execution
     A, d = np.array(ex.A), np.array(ex.d)
     c, s = math.cos(state.theta), math.sin(state.theta)
@@ -61,7 +62,7 @@ def test_eq_18_row_by_hand():
     m = 0.1 |(0.7, 0.3)| + 0 + 0.15 bound(0.76158) + 0.025
       = 0.076158 + 0.15 (0.02 + 0.76158/0.8 * 0.02) + 0.025 = 0.076158 + 0.005856 + 0.025 = 0.107014
     D = 0.15 + 0.2 + 0.1 + m = 0.557014; h = 1 - D^2 = 0.689736.
-    Eq. (18): 2 (-1, 0).(u_x, u_y) + 1.5 h >= 0  <=>  u_x <= 0.75 h = 0.517302.
+    eq:cbf_condition (25): 2 (-1, 0).(u_x, u_y) + 1.5 h >= 0  <=>  u_x <= 0.75 h = 0.517302.
     H = I: the minimum intervention only lowers u_x: u_safe = (0.517302, 0.3, 0)."""
     state = RobotState(0.0, 0.0, 0.0)
     obs = Obstacles.from_lists([[1.0, 0.0]], r=0.2)
@@ -142,7 +143,7 @@ def test_filter_properties(obstacles, theta, u_in, imperfect):
         assert np.max(l - C @ u) <= worst_grid + 1e-5
         return
     assert not info.infeasible and info.fallback is None
-    # every Eq. (18) constraint holds (evaluated literally) and the bounds hold
+    # every eq:cbf_condition (25) constraint holds (evaluated literally) and the bounds hold
     assert np.all(eq18(state, obs, u, rows.D, params) >= -1e-6 * np.maximum(rows.norm, 1.0))
     # minimum intervention: the same optimum as the exact brute-force solver
     f = float(np.sum(np.array(params.H_diag) * (u - u_in) ** 2))

@@ -1,5 +1,6 @@
 """The speed governor of BIG-CBF's policies (bigcbf/control/governor.py): the filter model and the governed scale,
-against values worked out by hand (Eq. (18) ``eq:cbf_condition`` with D_i of Eqs. (14)-(15))."""
+against values worked out by hand (``eq:cbf_condition`` (25) with D_i of eq:shared_barrier (20)
+and eq:uncertainty_margin (21))."""
 import dataclasses
 import math
 
@@ -32,8 +33,8 @@ def test_filter_model_projects_onto_one_row_or_the_corner_of_two():
 
 def test_obstacle_dead_ahead_slows_to_the_largest_admissible_scale():
     """Robot (0,0), u = (0.8, 0), static obstacle (0.7, 0), r = 0.25: q = (-0.7, 0), h = 0.49 - 0.25 = 0.24;
-    Eq. (18): -2 * 0.7 w_x + 1.5 * 0.24 >= 0  <=>  w_x <= 0.257143. Scale s gives w_x = 0.8 s: admissible up to
-    s = 0.3214; the progress after the filter is min(0.8 s, 0.257143): 0.24 at s = 0.3, 0.257143 at s = 0.4 and at
+    eq:cbf_condition (25): -2 * 0.7 w_x + 1.5 * 0.24 >= 0  <=>  w_x <= 0.257143. Scale s gives w_x = 0.8 s:
+    admissible up to s = 0.3214; the progress after the filter is min(0.8 s, 0.257143): 0.24 at s = 0.3, 0.257143 at s = 0.4 and at
     every larger s (projected onto the row). The smallest scale reaching the maximum: s* = 0.4, the governed command
     (0.32, 0), the model's velocity (0.257143, 0)."""
     s, w = govern_c(np.array([0j]), np.array([1 + 0j]), np.array([0.8 + 0j]), np.array([0.7 + 0j]),
@@ -63,8 +64,9 @@ def test_obstacle_ahead_right_keeps_full_speed_and_slides_along_the_row():
 
 
 def test_uncertainty_radius_grows_with_the_scale_eq_15():
-    """With tau95 = 0.2 s (kappa_exec = 1) the radius depends on the scale: D(s) = 0.5 + 0.2 * 0.8 s (Eq. 15, static
-    obstacle). Obstacle dead ahead at 0.9: h(s) = 0.81 - D(s)^2, and Eq. (18) bounds w_x <= 1.5 h(s) / 1.8.
+    """With tau95 = 0.2 s (kappa_exec = 1) the radius depends on the scale: D(s) = 0.5 + 0.2 * 0.8 s
+    (eq:uncertainty_margin (21), static obstacle). Obstacle dead ahead at 0.9: h(s) = 0.81 - D(s)^2, and
+    eq:cbf_condition (25) bounds w_x <= 1.5 h(s) / 1.8.
     s = 0.4: D = 0.564, h = 0.491904, bound 0.40992 >= 0.32: admissible, progress 0.32.
     s = 0.5: D = 0.58, h = 0.4736, bound 0.394667 < 0.4: w = 0.394667, progress 0.394667.
     s = 0.6: D = 0.596, h = 0.454784, bound 0.378987: progress 0.378987 (the bound shrinks further above).

@@ -1,4 +1,5 @@
-"""Eqs. (9), (10), (16), (17): the vectorized imagination against a per-behavior reference loop and by hand."""
+"""eq:behavior_rollout (12), eq:behavior_terms (13), eq:behavior_cost (14), eq:behavior_acceptance (22),
+eq:analytic_workload (24): the vectorized imagination against a per-behavior reference loop and by hand."""
 import dataclasses
 import math
 
@@ -126,7 +127,8 @@ def test_one_step_by_hand_eqs_10_16_17():
     J = 0.294544 - 1.5 * 0.08 + 0.05 * 0.64 = 0.206544. States k = 0, 1: h = 0.24 and 0.62^2 - 0.25 = 0.1344."""
     unc = UncertaintyParams(tau95_s=0.0, beta=0.0, e_zoh_m=0.0, execution=ExecutionModel(
         residual_bound_mps=(0.0, 0.0)))
-    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc, speed_governor=False)   # Eq. (8) literally
+    # eq:behavior_feedback (11) literally
+    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc, speed_governor=False)
     obs = Obstacles.from_lists([[0.7, 0.0]], r=0.25)
     img = imagine(RobotState(0, 0, 0), obs, np.array([5.0, 0.0]), params, current="GOAL")
     g = img.index("GOAL")
@@ -162,7 +164,8 @@ def test_noshared_uses_fixed_margin():
     # the obstacle moves 0.75 m in +y over 1.5 s; min h at k = 0: 1 - (0.15 + 0.2 + 0.1 + 0.3)^2
     assert img.h_min[0] == pytest.approx(1.0 - 0.75 ** 2)
     shared = imagine(state, obs, goal, SIMULATION, shared=True)
-    # shared, u = 0: m_k = 0.5 * 0.1 + 2 sqrt(0.01 + 0.01 * 0.1 k) + 0.15 * 0.02 + 0.025 (Eqs. 3, 15),
+    # shared, u = 0: m_k = 0.5 * 0.1 + 2 sqrt(0.01 + 0.01 * 0.1 k) + 0.15 * 0.02 + 0.025 (eq:cov_prop (3),
+    # eq:uncertainty_margin (21)),
     # D_k = 0.45 + m_k, ||q_k||^2 = 1 + (0.05 k)^2; e.g. k = 0: D = 0.728, h = 0.470016; the minimum is at k = 3:
     # D = 0.45 + 0.05 + 2 sqrt(0.013) + 0.028 = 0.756035, h = 1.0225 - 0.571589 = 0.450911
     k = np.arange(16)
@@ -181,9 +184,9 @@ def test_empty_scene():
 @pytest.mark.parametrize("params", [IMPERFECT, PHYSICAL])
 @pytest.mark.parametrize("shared", [True, False])
 def test_margins_are_kappa_img_m_i_eq_14_15(params, shared):
-    """Imagination.margin[b, k, i] = D_i - (r_R + r_i + d0): kappa_img m_i (Eq. 15 at the imagined yaw, the command
-    that moves the robot from state k (u_{N-1} at the terminal state) and the predicted covariance), or NoShared's
-    fixed margin."""
+    """Imagination.margin[b, k, i] = D_i - (r_R + r_i + d0): kappa_img m_i (eq:uncertainty_margin (21) at the imagined
+    yaw, the command that moves the robot from state k (u_{N-1} at the terminal state) and the predicted covariance), or
+    NoShared's fixed margin."""
     state, obs, goal = scene(4)
     img = imagine(state, obs, goal, params, modes=MODES7, shared=shared)
     unc = params.uncertainty

@@ -1,4 +1,5 @@
-"""E_CBF (Eq. 20) and the per-step metrics; the method registry, the planner protocol, robot-side imports, perf."""
+"""E_CBF (eq:sim_cbf_energy (27)) and the per-step metrics; the method registry, the planner protocol, robot-side
+imports, perf."""
 import subprocess
 import sys
 

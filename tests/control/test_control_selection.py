@@ -169,7 +169,7 @@ def test_selection_clock_and_eq_5_regeneration():
         state = RobotState(0.01 * k, 0.0, 0.0)
         u, info = planner.plan(t, state, obs, GOAL)
         planned.append(info.planned)
-        # Eq. (5): between selections the retained policy is re-evaluated at the latest state
+        # eq:online_behavior_command (8): between selections the retained policy is re-evaluated at the latest state
         np.testing.assert_allclose(u, behavior_command(info.mode, state, obs, GOAL, P))
         assert info.path.shape == (P.N + 1, 2) and info.planner_ms >= 0
     assert [k for k, p in enumerate(planned) if p] == [0, 10, 20, 30, 40]
@@ -278,7 +278,8 @@ def test_release_from_inside_a_static_margin_backs_off_towards_a_viable_maneuver
 
 
 def test_viable_is_accepted_and_progressing():
-    """Imagination.viable: accepted (Eq. 16) and, for GOAL/PASS/SIDE, progress P (Eq. 10) of at least
+    """Imagination.viable: accepted (eq:behavior_acceptance (22)) and, for GOAL/PASS/SIDE, progress P
+    (eq:behavior_terms (13)) of at least
     v_freeze N dt = 0.075 m unless the rollout ends in the goal region; YIELD is exempt. A frozen behavior is not
     retained; when nothing is viable the selector falls back to REVERSE."""
     modes = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")

@@ -1,4 +1,5 @@
-"""Eqs. (1)-(4) and (11)-(15): prediction, execution model, uncertainty radius, D_i and h_i, by hand."""
+"""eq:execution (1) to eq:predicted_obstacles (4) and eq:relative_position_error (15) to eq:uncertainty_margin
+(21): prediction, execution model, uncertainty radius, D_i and h_i, by hand."""
 import dataclasses
 import math
 
@@ -19,10 +20,10 @@ def test_prediction_eqs_2_to_4_by_hand():
                                cov=[np.diag([0.01, 0.04]), np.zeros((2, 2))], static=[False, True])
     p, cov = predict_obstacles(obs, N=3, dt=0.1, q_sigma=np.array([0.2, 0.0]))
     assert p.shape == (4, 2, 2) and cov.shape == (4, 2, 2, 2)
-    # Eq. (2) three times: (1, 2) + 3 * 0.1 * (0.5, -1) = (1.15, 1.7)
+    # eq:obs_prop (2) three times: (1, 2) + 3 * 0.1 * (0.5, -1) = (1.15, 1.7)
     np.testing.assert_allclose(p[3, 0], [1.15, 1.7])
     np.testing.assert_allclose(p[:, 1], 0.0)
-    # Eq. (3) three times: diag(0.01, 0.04) + 3 * 0.2 * 0.1 I = diag(0.07, 0.10)
+    # eq:cov_prop (3) three times: diag(0.01, 0.04) + 3 * 0.2 * 0.1 I = diag(0.07, 0.10)
     np.testing.assert_allclose(cov[3, 0], np.diag([0.07, 0.10]))
     # the recursions themselves
     np.testing.assert_allclose(p[1:], p[:-1] + 0.1 * obs.v[None])
@@ -95,7 +96,7 @@ def test_uncertainty_radius_eq_15_by_hand():
     # e_ZOH 0.025                                  -> m = 0.2193177
     m = uncertainty_radius(0.0, [0.5, 0.0, 0.0], [-0.3, 0.4], np.diag([0.0025, 0.0009]), unc)
     assert m == pytest.approx(0.0894427191 + 0.1 + 0.004875 + 0.025)
-    # Eq. (14): D = 0.15 + 0.25 + 0.10 + 1.0 * m; h = ||q||^2 - D^2 with q = (1.0, 0.5)
+    # eq:shared_barrier (20): D = 0.15 + 0.25 + 0.10 + 1.0 * m; h = ||q||^2 - D^2 with q = (1.0, 0.5)
     D = inflated_radius(0.25, m, unc.kappa_exec, unc)
     assert D == pytest.approx(0.5 + 0.2193177191)
     assert barrier(np.array([1.0, 0.5]), D) == pytest.approx(1.25 - (0.7193177191) ** 2)
@@ -114,14 +115,15 @@ def test_kappa_img_static_only_without_dynamic_obstacles():
 @given(q=st.tuples(st.floats(-3, 3), st.floats(-3, 3)), ang=st.floats(0, 2 * math.pi), frac=st.floats(0, 1),
        r_i=st.floats(0, 0.5), m=st.floats(0, 0.5), kappa=st.floats(0.5, 1.5))
 def test_robust_condition_eqs_11_to_13(q, ang, frac, r_i, m, kappa):
-    """Eq. (13): ||q|| >= D (Eq. 14) and ||eps_rel|| <= kappa m (Eq. 12) imply the true clearance of Eq. (6)."""
+    """eq:robust_distance_condition (19): ||q|| >= D (eq:shared_barrier (20)) and ||eps_rel|| <= kappa m
+    (eq:relative_error_bound (17)) imply the true clearance of eq:true_safety_requirement (6)."""
     unc = UncertaintyParams()
     q = np.array(q)
     D = inflated_radius(r_i, m, kappa, unc)
     if barrier(q, D) < 0:
         return
     eps = frac * kappa * m * np.array([math.cos(ang), math.sin(ang)])
-    true_rel = q + eps                       # p_true - p_i,true = q_i + eps_rel (Eq. 11)
+    true_rel = q + eps                       # p_true - p_i,true = q_i + eps_rel (unlabelled (16))
     assert np.linalg.norm(true_rel) >= unc.r_robot_m + r_i + unc.d0_m - 1e-12
 
 

@@ -6,7 +6,7 @@ from bigcbf.perception.kalman import cv_process_noise, cv_transition, kf_predict
 
 
 def test_transition_is_eq2_constant_velocity():
-    # Eq. (2): p_{k+1} = p_k + dt v_k. From p = (1, 2), v = (0.5, -1), dt = 0.2: p = (1.1, 1.8), v unchanged.
+    # eq:obs_prop (2): p_{k+1} = p_k + dt v_k. From p = (1, 2), v = (0.5, -1), dt = 0.2: p = (1.1, 1.8), v unchanged.
     x = np.array([[1.0, 2.0, 0.5, -1.0]])
     x1, _ = kf_predict(x, np.zeros((1, 4, 4)), 0.2, 0.0)
     assert x1[0] == pytest.approx([1.1, 1.8, 0.5, -1.0])

@@ -16,8 +16,9 @@ D = np.array([0.02, 0.0, -0.01])
 
 
 def test_zoh_displacement_by_hand():
-    # Eq. (15) e_ZOH = T_C * v: commands every 0.05 s except one 0.2 s gap among 40 intervals -> the 95 % quantile
-    # of the intervals is the 38th smallest of 40 = 0.05; speeds 0..0.99 (100 values) -> 99 %: 99th = 0.98 m/s
+    # eq:uncertainty_margin (21) e_ZOH = T_C * v: commands every 0.05 s except one 0.2 s gap among 40 intervals -> the
+    # 95 % quantile of the intervals is the 38th smallest of 40 = 0.05; speeds 0..0.99 (100 values) -> 99 %: 99th = 0.98
+    # m/s
     t = np.concatenate([np.arange(0, 1.0, 0.05), 1.15 + np.arange(0, 1.0, 0.05)])
     v = np.column_stack([np.arange(100) / 100.0, np.zeros(100)])
     e, T, s = zoh_displacement(t, v)

@@ -1,4 +1,5 @@
-"""Delay estimation (twin.delay) on synthetic signals with known delays, and tau95 of Eq. (15) by hand."""
+"""Delay estimation (twin.delay) on synthetic signals with known delays, and tau95 of eq:uncertainty_margin (21) by
+hand."""
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -33,7 +34,7 @@ def test_quantile_upper_and_intervals_by_hand():
 
 
 def test_tau95_pairs_every_actuation_delay_with_every_latency():
-    # Eq. (15) tau95 by hand: sums {0.1, 0.2, 0.2, 0.3}; 95 %: ceil(0.95 * 4) = 4th smallest = 0.3
+    # eq:uncertainty_margin (21) tau95 by hand: sums {0.1, 0.2, 0.2, 0.3}; 95 %: ceil(0.95 * 4) = 4th smallest = 0.3
     assert tau95([0.1, 0.2], [0.0, 0.1]) == pytest.approx(0.3)
     assert tau95([0.1, 0.2], [0.0, 0.1], q=0.5) == pytest.approx(0.2)       # ceil(2) = 2nd = 0.2
     assert tau95([0.1, 0.2, 0.3], []) == pytest.approx(0.3)                  # no scans: the actuation delays alone
@@ -164,7 +165,7 @@ def test_estimate_delay_recovers_latency_and_jitter_distribution():
     assert len(est.edge_delays_s) > 100
     # commands at 20 Hz, scans at 10 Hz: ages 0 and 0.05 -> the sum's 95 % quantile = 0.05 + actuation's upper part
     assert set(np.round(est.perception_latency_s, 6)) == {0.0, 0.05}
-    # tau95 from the translational axes' edges (Eq. (15) multiplies it by a translational velocity)
+    # tau95 from the translational axes' edges (eq:uncertainty_margin (21) multiplies it by a translational velocity)
     assert est.tau95_axes == (0, 1)
     trans = np.isin(est.edge_axes, [0, 1])
     assert est.tau95_s == pytest.approx(tau95(est.edge_delays_s[trans], est.perception_latency_s))

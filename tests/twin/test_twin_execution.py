@@ -1,4 +1,4 @@
-"""Execution model of Eq. (1) (twin.execution): least squares, identified axes, saturation, settled samples."""
+"""Execution model eq:execution (1) (twin.execution): least squares, identified axes, saturation, settled samples."""
 import numpy as np
 
 from twin.execution import (ExecutionOptions, fit_execution, identified_axes, least_squares, runs_at_least,
@@ -11,7 +11,7 @@ D_TRUE = np.array([0.02, -0.01, 0.03])
 def test_least_squares_is_exact_on_noiseless_data():
     rng = np.random.default_rng(0)
     u = rng.uniform(-1, 1, (200, 3))
-    v = u @ A_TRUE.T + D_TRUE                    # Eq. (1) without residual
+    v = u @ A_TRUE.T + D_TRUE                    # eq:execution (1) without residual
     A, d = least_squares(u, v, np.array([True, True, True]))
     np.testing.assert_allclose(A, A_TRUE, atol=1e-12)
     np.testing.assert_allclose(d, D_TRUE, atol=1e-12)

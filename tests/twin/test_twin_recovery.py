@@ -84,7 +84,7 @@ def test_random_profiles_with_wheel_limits_recovered(limited_drives):
         np.testing.assert_allclose(np.diag(cal.fit.A), np.diag(np.asarray(prof.gain)), rtol=0.05)
         # the summary says plainly that a linear model would be wrong, and what it would claim
         assert any("A linear model v = A u + d is wrong above the limit" in n for n in cal.notes())
-        # coverage on all held-out samples (saturated ones fall outside Eq. (1)) and on the unsaturated ones
+        # coverage on all held-out samples (saturated ones fall outside eq:execution (1)) and on the unsaturated ones
         assert cal.coverage_heldout_all <= cal.coverage_heldout_transients
         assert cal.bound.coverage_heldout == pytest.approx(0.95, abs=0.04)
         # the profile written carries the limits and tau95's parts, and the stack reads it

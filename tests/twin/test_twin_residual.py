@@ -1,4 +1,5 @@
-"""Residual bound of e_exec(u), Eq. (15) (twin.residual): conformal quantiles, knots, held-out coverage."""
+"""Residual bound of e_exec(u), eq:uncertainty_margin (21) (twin.residual): conformal quantiles, knots, held-out
+coverage."""
 import numpy as np
 import pytest
 
@@ -71,8 +72,8 @@ def test_held_out_coverage_matches_the_stated_one_on_exchangeable_data():
 
 
 def test_e_exec_from_the_calibrated_knots_by_hand():
-    # Eq. (15) e_exec(u) = residual_horizon_s * interp(||u_xy||): ||(0.3, 0.4)|| = 0.5, halfway between knots 0.4
-    # and 0.6 -> bound 0.03 m/s; times 0.2 s = 0.006 m
+    # eq:uncertainty_margin (21) e_exec(u) = residual_horizon_s * interp(||u_xy||): ||(0.3, 0.4)|| = 0.5, halfway
+    # between knots 0.4 and 0.6 -> bound 0.03 m/s; times 0.2 s = 0.006 m
     m = ExecutionModel(residual_speed_mps=(0.0, 0.4, 0.6), residual_bound_mps=(0.01, 0.02, 0.04),
                        residual_horizon_s=0.2)
     assert float(e_exec(np.array([0.3, 0.4, 1.0]), m)) == pytest.approx(0.006)

@@ -31,8 +31,8 @@ def test_vy_not_identified_and_not_guessed(cal):
 
 
 def test_fitted_model_beats_the_identity_model(cal):
-    """Held-out blocks: the calibrated model against the nominal model v(t) = u(t): on the settled samples (Eq. (1),
-    A and d) and on every held-out sample (the saturating model with its dead time, lag and acceleration limit)."""
+    """Held-out blocks: the calibrated model against the nominal model v(t) = u(t): on the settled samples (eq:execution
+    (1), A and d) and on every held-out sample (the saturating model with its dead time, lag and acceleration limit)."""
     for j in (0, 2):
         assert cal.rmse_model[j] < cal.rmse_nominal[j]
     ra = cal.rmse_all
