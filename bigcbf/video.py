@@ -268,7 +268,7 @@ class EpisodeVideo:
 
     def close(self) -> None:
         """Finish the video (it appears at its path only now)."""
-        self.progress.update(self.progress.t, "encoding")
+        self.progress.update(float(self.ep.world.t), "encoding")      # the episode's end (after its last step)
         try:
             self.writer.close()
         finally:
