@@ -162,6 +162,16 @@ class _DirLock:
 
 #: what a bench leaves in --out before its database holds anything (a bench stopped at its start): not the user's
 _START_REMNANTS = frozenset({".bench.lock", DB_NAME, DB_NAME + "-wal", DB_NAME + "-shm", DB_NAME + "-journal"})
+#: the folders where the generated and faults suites write their scenario files before the bench starts
+SUITE_FOLDERS = ("worlds", "faults")
+
+
+def _suite_folder(folder: Path) -> bool:
+    """A folder a suite wrote: it holds nothing but scenario TOML files (in sub-folders too)."""
+    try:
+        return folder.is_dir() and all(p.is_dir() or p.suffix == ".toml" for p in folder.rglob("*"))
+    except OSError:
+        return False
 
 
 def is_results_db(path: Path) -> bool:
@@ -215,6 +225,7 @@ def check_bench_out(out: str | Path, inputs=()) -> None:
         rel = os.path.relpath(os.path.realpath(p), real_out)
         if not rel.startswith(os.pardir):
             held.add(rel.split(os.sep)[0])
+    held |= {f for f in SUITE_FOLDERS if f in entries and _suite_folder(out / f)}
     other = sorted(entries - _START_REMNANTS - held)
     if other:
         shown = ", ".join(other[:3]) + (", ..." if len(other) > 3 else "")

@@ -102,6 +102,9 @@ def run(args) -> int:
     check_distinct({"scenario": scenario.file, "--config": args.config, "--profile": args.profile,
                     "--robot-profile": args.robot_profile}, {"--video": args.video, "--log": args.log})
     config = load_config(args.config, args.profile, notes=stderr_note)
+    from ..sanity import describe, sensor_check
+    for line in sensor_check(scenario.scene(), scenario.robot_profile.lidar, config.stack, scenario.robot_profile)[1]:
+        stderr_note(line)                            # at the start: a sensor that cannot see the scene's obstacles
     live = None
     try:
         with interrupts_as_keyboard_interrupt():     # Ctrl-C, SIGTERM: one KeyboardInterrupt, never inside a log write
@@ -112,14 +115,18 @@ def run(args) -> int:
             res = run_episode(scenario, args.method, args.seed, config=config, perception=args.perception,
                               time_limit_s=args.time_limit, video=args.video, camera=args.camera, log=args.log,
                               live=live)
-    except KeyboardInterrupt as exc:                 # the log recorded so far is kept as X.partial.mcap
+    except KeyboardInterrupt as exc:                 # what was recorded so far: X.partial.mcap, X.partial.mp4
         for path in getattr(exc, "partial_logs", ()):
             print(f"kept the log recorded so far as {path}", file=sys.stderr)
+        for path in getattr(exc, "partial_videos", ()):
+            print(f"kept the video recorded so far as {path}", file=sys.stderr)
         raise
     finally:
         if live is not None:
             live.close()
     out = res.metrics()
+    for line in describe({k: v for k, v in res.warnings.items() if k != "lidar_sees_obstacles_late"}):
+        stderr_note(line)
     if args.json:
         print(strict_json(out))
     else:
