@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .control.cbf import CbfFilter
+from .cost import check_episode_cost
 from .control.kernels import goal_distance, in_goal_region
 from .control.methods import make_planner
 from .control.metrics import EpisodeMetrics
@@ -28,6 +29,7 @@ from .errors import UserError
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
+from .sanity import odometry_check, sensor_check
 from .scenario import Scenario
 from .sim.lidar import LidarConfig
 from .sim.pedestrians import SocialForceParams, WorldPedestrians
@@ -186,6 +188,10 @@ class Episode:
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
         self.perception_mode = perception
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)
+        # refused before anything is built when its estimated work is above the bound (bigcbf/cost.py)
+        check_episode_cost(scenario, method, params, method_params=method_params,
+                           perception_params=perception_params, lidar=lidar, time_limit_s=self.time_limit_s,
+                           perception=perception)
         self.world = SimWorld(scenario.scene(), profile=scenario.robot_profile, seed=seed, lidar=lidar)
         self.truth = GroundTruth(self.world.model, self.world.scene)
         # the pedestrians walk in the world (their social-force model and mocap bodies: sim/pedestrians.py)
@@ -200,6 +206,9 @@ class Episode:
         self.perception = Perception(perception_params)
         self.goal = scenario.goal
         self.observers: list[Callable[[StepRecord], None]] = []
+        # results that would be false without a word (bigcbf/sanity.py): warnings beside MuJoCo's, and their lines
+        self.sanity_warnings, self.notes = sensor_check(self.world.scene, self.world.lidar.config, params,
+                                                        scenario.robot_profile)
 
     def _estimate(self, scan, odom: RobotState) -> Obstacles:
         if self.perception_mode == "truth":
@@ -254,8 +263,13 @@ class Episode:
                     self.metrics.scan(None)
             if k % self._spc == 0:
                 state = w.odom() if self.perception_mode == "lidar" else w.true_state()
-                if in_goal_region(goal_distance(state.p, self.goal), self.params.eps_g_m):   # eq:goal_region
+                dist = goal_distance(state.p, self.goal)
+                if in_goal_region(dist, self.params.eps_g_m):   # eq:goal_region
                     self._success = self.done = True
+                    if k == 0:               # success before any command: said, never silent (bigcbf/sanity.py)
+                        self.sanity_warnings["started_in_goal_region"] = 1
+                        self.notes.append(f"the robot started inside the goal region: {float(dist):.2f} m from the "
+                                          f"goal, eps_g_m {self.params.eps_g_m:g} m; success at t = 0 without moving")
                     return
                 self.state = state
                 return
@@ -316,12 +330,18 @@ class Episode:
         """The episode's metrics so far (final once ``done``)."""
         w = self.world
         ts = w.true_state()
+        warnings = {**w.warnings(), **self.sanity_warnings}
+        if self.done:                # success is judged on the odometry (the paper's rule): say when it lied
+            odom = w.odom() if self.perception_mode == "lidar" else ts
+            diverged, lines = odometry_check((ts.px, ts.py), (odom.px, odom.py), self.params.eps_g_m)
+            warnings.update(diverged)
+            self.notes += [x for x in lines if x not in self.notes]
         return EpisodeResult(
             scenario=self.scenario.name, method=self.method or EXTERNAL, seed=self.seed, success=self._success,
             collision=self._collision, timeout=self.done and not (self._success or self._collision),
             time_s=round(w.t, 4), final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0,
-            perception=self.perception_mode, warnings=w.warnings(), **self.metrics.results(w.t))
+            perception=self.perception_mode, warnings=warnings, **self.metrics.results(w.t))
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
