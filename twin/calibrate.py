@@ -287,6 +287,30 @@ def _limits_notes(model: SaturatingModel, v_stack: float) -> list[str]:
     return out
 
 
+NEVER_MOVED = 0.05          # the odometry's path below this fraction of the commanded one: the robot never moved [-]
+
+
+def _check_moved(cmd, odom, path: str) -> None:
+    """A UserError when the odometry shows (next to) no motion while the commands ask for some: the path length
+    and the summed heading change under ``NEVER_MOVED`` of the commanded ones (||u_xy|| and |wz| held over the
+    odometry's span), each where the commands ask for at least 0.2 m or 0.2 rad."""
+    t = odom.t[odom.t >= cmd.t[0]]
+    if len(t) < 2:
+        return
+    u = zoh(cmd.t, cmd.u, t[:-1])
+    dt = np.diff(t)
+    want_xy = float(np.sum(np.hypot(u[:, 0], u[:, 1]) * dt))
+    want_yaw = float(np.sum(np.abs(u[:, 2]) * dt))
+    pose = odom.pose[odom.t >= cmd.t[0]]
+    got_xy = float(np.sum(np.hypot(*np.diff(pose[:, :2], axis=0).T)))
+    got_yaw = float(np.sum(np.abs(np.diff(np.unwrap(pose[:, 2])))))
+    asked = [(g, w) for g, w in ((got_xy, want_xy), (got_yaw, want_yaw)) if w >= 0.2]
+    if asked and all(g < NEVER_MOVED * w for g, w in asked):
+        raise UserError(f"the robot never moved: the commands on {cmd.topic} ask for {want_xy:.2f} m and "
+                        f"{want_yaw:.2f} rad, the odometry ({odom.topic}) shows {got_xy:.3f} m and {got_yaw:.3f} rad; "
+                        "nothing to calibrate", file=path)
+
+
 def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions()) -> Calibration:
     """Calibrate from extracted series (commands and odometry required, scan stamps optional)."""
     path = str(data.path)
@@ -302,6 +326,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     if min(cmd.t[-1], odom.t[-1]) - max(cmd.t[0], odom.t[0]) < 2.0:
         raise UserError(f"the commands ({cmd.topic}) and the odometry ({odom.topic}) overlap for less than 2 s",
                         file=path)
+    _check_moved(cmd, odom, path)
     held_cmd = zoh(cmd.t, cmd.u, odom.t[(odom.t >= cmd.t[0])])
     axes = identified_axes(held_cmd, opt.execution)
     if not axes.any():

@@ -15,6 +15,13 @@ The log is written to a temporary file beside ``out`` and renamed to ``out`` onl
 drive that fails (it leaves the room's free space, the simulation breaks, Ctrl-C) leaves no complete-looking log
 behind; the failure is a :class:`~bigcbf.errors.UserError` (one line on the command line).
 
+A drive whose robot did not follow its commands is an error too, with no log written: when the true path or the
+odometry's path is shorter than ``MIN_FOLLOW`` (25 %) of the commanded path (the sum of ||u_xy|| T_C over the
+commands; checked once the commands ask for at least ``MIN_COMMANDED_M``). Such a log calibrates to something false
+(a robot that never moved, its latency far beyond the drive, gives tau95 ~1 s with no word; wheels spinning on a
+floor without grip give the wheels' calibration of a robot that stayed where it was), and the recorder's one job
+is a log worth calibrating, so a warning beside a written log would not do.
+
 The odometry twist is the average over the odometry period (the pose change from the previous message, in the
 body frame at mid-heading, divided by the period), as a robot's driver computes it from encoder counts; the
 instantaneous wheel speeds of the model jitter when rollers change contact (spikes of several tenths of rad/s in
@@ -41,6 +48,8 @@ from .drive import CalibrationDrive, DriveLimits
 TICK_S = 0.01
 CMD_EVERY, ODOM_EVERY, SCAN_EVERY = 5, 2, 10        # in ticks: 20 Hz, 50 Hz, 10 Hz
 ROOM_EXTENT_M = 4.0
+MIN_FOLLOW = 0.25          # the true and the odometry path at least this fraction of the commanded path [-]
+MIN_COMMANDED_M = 0.5      # ... once the commanded path is at least this long [m]
 
 
 def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, duration_s: float = 60.0,
@@ -61,6 +70,8 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
     meta = {"kind": "calibration drive", "seed": seed, "duration_s": duration_s,
             "robot_profile": repr(to_dict(profile)), "limits": repr(asdict(limits))}
     reach = 0.0
+    commanded = true_path = odom_path = 0.0
+    last_truth = last_odom = None
     prev: RobotState | None = None
     tmp = out.with_name(f".{out.name}.part{os.getpid()}")
     try:
@@ -79,6 +90,10 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
                     w.ground_truth(t, truth)
                     w.imu(t, world.imu(), cov=cov.imu())
                     reach = max(reach, float(np.hypot(truth.px, truth.py)))
+                    if last_truth is not None:
+                        true_path += float(np.hypot(truth.px - last_truth.px, truth.py - last_truth.py))
+                        odom_path += float(np.hypot(odom.px - last_odom.px, odom.py - last_odom.py))
+                    last_truth, last_odom = truth, odom
                     if reach > ROOM_EXTENT_M - 0.6 or not np.isfinite(reach):
                         raise UserError(f"the calibration drive left the room's free space at t = {t:.1f} s "
                                         f"(|p| = {reach:.2f} m, seed {seed}); no log written: is the robot profile "
@@ -92,13 +107,21 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
                     u = drive.command(t, (o.px, o.py, o.theta))
                     world.command(u)
                     w.cmd_vel(t, u)
+                    commanded += float(np.hypot(u[0], u[1])) * CMD_EVERY * TICK_S
                 world.step(steps)
+            moved = min(true_path, odom_path)
+            if commanded >= MIN_COMMANDED_M and moved < MIN_FOLLOW * commanded:
+                raise UserError(f"the robot did not follow the calibration drive: it was commanded along "
+                                f"{commanded:.2f} m and moved {true_path:.2f} m (odometry {odom_path:.2f} m), under "
+                                f"{MIN_FOLLOW:.0%}; no log written: is the robot profile within the documented ranges "
+                                "(latency, floor friction: bigcbf/params/robot.py)?", file=str(out))
             counts = dict(w.counts)
         os.replace(tmp, out)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return {"path": str(out), "duration_s": duration_s, "messages": counts, "max_distance_m": reach,
+            "commanded_path_m": commanded, "true_path_m": true_path, "odometry_path_m": odom_path,
             "recentrings": drive.recentrings, "warnings": world.warnings()}
 
 
