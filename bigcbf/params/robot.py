@@ -42,9 +42,9 @@ A TOML robot profile (all keys optional; the defaults of the dataclasses are an 
     [faults.latency_spikes]
     rate_per_s = 0.0
 
-The executed body twist is ``A u + d + r + s`` (paper Eq. (1), with A extended to 3x3 to cover yaw rate; ``s`` the
-lateral slip, perpendicular to the commanded translation), applied ``latency`` after the command was issued; the
-wheels then realise it through the Mecanum inverse kinematics and the floor contact. Every random source draws
+The executed body twist is ``A u + d + r + s`` (the paper's eq:execution (1), with A extended to 3x3 to cover yaw rate;
+``s`` the lateral slip, perpendicular to the commanded translation), applied ``latency`` after the command was issued;
+the wheels then realise it through the Mecanum inverse kinematics and the floor contact. Every random source draws
 from its own stream (``bigcbf.sim.world``), so that e.g. LiDAR noise does not change the execution residuals.
 Wheel limits, as a base's firmware has them (``bigcbf.sim.firmware.WheelLimiter``): the wheel rim speeds of the
 twist, ``vx -+ vy -+ k wz`` for the four wheels (k = ``wheel_yaw_lever_m``, by default half wheelbase + half

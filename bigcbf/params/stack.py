@@ -20,10 +20,10 @@ simply a StackParams TOML holding only the ``[uncertainty]`` and ``[uncertainty.
 
 The calibration adds informational keys the stack does not use (it reads them back, and ``bigcbf replay --profile``
 uses the limits): ``wheel_speed_max_mps``, ``wheel_yaw_lever_m``, ``wheel_accel_max_mps2`` in
-``[uncertainty.execution]`` (the robot's wheel limits: Eq. (1) holds below them), and the table
+``[uncertainty.execution]`` (the robot's wheel limits: eq:execution (1) holds below them), and the table
 ``[uncertainty.tau95_parts]`` (what tau95 is made of).
 
-Equation numbers follow issue 3 (see ``bigcbf/control/__init__.py`` for the mapping to the paper's labels).
+Equations are cited as ``eq:label (N)``, the paper's LaTeX label and printed number (``bigcbf/control/__init__.py``).
 """
 from __future__ import annotations
 
@@ -55,10 +55,10 @@ def _finite(name: str, *values: float) -> None:
 
 @dataclass(frozen=True)
 class ExecutionModel:
-    """The execution model of Eq. (1) and the execution-residual term e_exec(u) of Eq. (15).
+    """The execution model eq:execution (1) and the execution-residual term e_exec(u) of eq:uncertainty_margin (21).
 
-    The realized body twist is ``A u + d + r``; Eq. (1) uses the translational rows (vx, vy) of A and d, the
-    yaw row propagates the heading in the imagination.
+    The realized body twist is ``A u + d + r``; eq:execution (1) uses the translational rows (vx, vy) of A and d,
+    the yaw row propagates the heading in the imagination.
 
     ``e_exec(u) = residual_horizon_s * bound(||u_xy||)`` [m], with ``bound`` the piecewise-linear interpolation
     of ``residual_bound_mps`` over the knots ``residual_speed_mps`` (clamped beyond the last knot).
@@ -121,10 +121,11 @@ class Tau95Parts:
 
 @dataclass(frozen=True)
 class UncertaintyParams:
-    """The shared uncertainty of Eqs. (11)-(15): D_i = r_R + r_i + d0 + kappa_l m_i.
+    """The shared uncertainty of eq:relative_position_error (15) to eq:uncertainty_margin (21):
+    D_i = r_R + r_i + d0 + kappa_l m_i.
 
-    ``q_sigma_m2_per_s`` is the covariance-growth intensity of Eq. (3) for dynamic obstacles. Choice: a walking
-    person's velocity drifts by a few tenths of m/s within a second, which puts the constant-velocity prediction
+    ``q_sigma_m2_per_s`` is the covariance-growth intensity of eq:cov_prop (3) for dynamic obstacles. Choice: a
+    walking person's velocity drifts by a few tenths of m/s within a second, which puts the constant-velocity prediction
     error at about 0.12 m (1 sigma) after the 1.5 s horizon: q = 0.12^2 / 1.5 ~= 0.01 m^2/s, i.e. a
     beta * sigma = 0.24 m prediction radius at the end of the horizon. Static obstacles and wall points do not
     move, so their covariance does not grow (``q_sigma_static_m2_per_s`` = 0).
@@ -141,8 +142,8 @@ class UncertaintyParams:
     kappa_img: float = ranged(1.0, 0, 10)  # layer scaling of m_i in the imagination [-]
     kappa_exec: float = ranged(1.0, 0, 10)  # layer scaling of m_i in the CBF filter [-]
     kappa_img_static: float | None = ranged(None, 0, 10)  # kappa_img when no dynamic obstacle is tracked [-]
-    q_sigma_m2_per_s: float = ranged(0.01, 0, 100)  # Eq. (3) covariance growth, dynamic obstacles [m^2/s]
-    q_sigma_static_m2_per_s: float = ranged(0.0, 0, 100)  # Eq. (3) covariance growth, static obstacles and wall points [m^2/s]
+    q_sigma_m2_per_s: float = ranged(0.01, 0, 100)  # eq:cov_prop (3) growth, dynamic obstacles [m^2/s]
+    q_sigma_static_m2_per_s: float = ranged(0.0, 0, 100)  # eq:cov_prop (3) growth, static obstacles, walls [m^2/s]
     execution: ExecutionModel = field(default_factory=ExecutionModel)
     tau95_parts: Tau95Parts | None = None   # informational (written by bigcbf calibrate)
 
@@ -163,34 +164,36 @@ class StackParams:
     """Everything the BIG-CBF stack needs (Table I defaults; choices not in the paper documented here).
 
     Choices the paper leaves open:
-    - ``alpha_per_s``: CBF gain of Eqs. (17)-(18). With h = |q|^2 - D^2, the constraint allows an approach speed
-      of alpha (|q|^2 - D^2) / (2 |q|); 1.5 1/s lets the robot close in at ~0.4 m/s when 0.3 m outside a 0.5 m
-      inflated radius and brakes smoothly to zero at the boundary; alpha * T_C = 0.075 << 1 keeps the sampled
-      filter close to its continuous-time design.
+    - ``alpha_per_s``: CBF gain of the unlabelled display (23) (gamma) and of eq:cbf_condition (25). With
+      h = |q|^2 - D^2, the constraint allows an approach speed of alpha (|q|^2 - D^2) / (2 |q|); 1.5 1/s lets the robot
+      close in at ~0.4 m/s when 0.3 m outside a 0.5 m inflated radius and brakes smoothly to zero at the boundary;
+      alpha * T_C = 0.075 << 1 keeps the sampled filter close to its continuous-time design.
     - ``d_pass_min_m``, ``in_way_margin_m`` and ``relevant_range_m``: the locally relevant obstacle and d_pass of
-      Eq. (7), see ``bigcbf.control.behaviors``. ``in_way_margin_m`` (0.15 m, about the imagination's margin
-      kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way" when
-      the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
-      barrier test of Eq. (16) (BIG-CBF-NoShared uses its own imagination margin, ``noshared_margin_m``, instead);
-      it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
+      eq:behavior_subgoals (10), see ``bigcbf.control.behaviors``. ``in_way_margin_m`` (0.15 m, about the imagination's
+      margin kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way"
+      when the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
+      barrier test of eq:behavior_acceptance (22) (BIG-CBF-NoShared uses its own imagination margin,
+      ``noshared_margin_m``, instead); it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
       way" of a robot centred in it (docs/fidelity.md, "Behavior imagination and selection").
     - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
       (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
     - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior viable):
       move away from obstacles closer than r_R + r_i + d0 + release_range_m, else straight back from the goal.
-    - ``u_min``/``u_max``: actuator box of the QP (Eq. 19); must contain 0 (the braking fallback).
-    - ``H_diag``, ``R_u_diag``: diagonal weights of Eq. (19) and of E_CBF (Eq. 20); identity (all channels in
-      their SI units; the behaviors do not command yaw, so the yaw channel rarely matters).
+    - ``u_min``/``u_max``: actuator box of the QP (eq:hard_cbf_qp (26)); must contain 0 (the braking fallback).
+    - ``H_diag``, ``R_u_diag``: diagonal weights of eq:hard_cbf_qp (26) and of E_CBF (eq:sim_cbf_energy (27));
+      identity (all channels in their SI units; the behaviors do not command yaw, so the yaw channel rarely matters).
     - ``max_obstacle_constraints``, ``wall_sectors``: the CBF uses every tracked obstacle (ids >= 0; the
       ``max_obstacle_constraints`` with smallest h if more) and, of the wall points (ids < 0), the nearest one in
       each of ``wall_sectors`` equal bearing sectors around the robot, so walls on both sides of a corridor are
       always represented. The imagination uses the same selection (from the initial state).
-    - ``w_eps``: the regularizer epsilon of Eq. (17), in the units of |grad_u gamma|^2 [m^2].
-    - ``speed_governor``: BIG-CBF's GOAL/PASS/SIDE commands (Eq. 8) are scaled to the speed that makes the most
-      progress after a 2-D model of the common CBF (rows of Eq. 18, D_i at that command), at every control tick
+    - ``w_eps``: the regularizer epsilon of eq:analytic_workload (24), in the units of |grad_u gamma|^2 [m^2].
+    - ``speed_governor``: BIG-CBF's GOAL/PASS/SIDE commands (eq:behavior_feedback (11)) are scaled to the speed
+      that makes the most progress after a 2-D model of the common CBF (rows of eq:cbf_condition (25), D_i at that
+      command), at every control tick
       and in every rollout step (``bigcbf.control.governor``), with the viability test of the selection and the
-      release chosen by what it makes possible (docs/fidelity.md, liveness); false (default): Eq. (8) at the
-      nominal limits v_b^max, selection on Eq. (16) alone, release by least barrier deficit.
+      release chosen by what it makes possible (docs/fidelity.md, liveness); false (default):
+      eq:behavior_feedback (11) at the nominal limits v_b^max, selection on eq:behavior_acceptance (22) alone, release
+      by least barrier deficit.
     """
 
     T_B_s: float = ranged(0.5, 0.002, 60)  # behavior-selection period [s]
@@ -206,7 +209,7 @@ class StackParams:
     w_sw: float = ranged(0.5, 0, 1000)  # weight of switching C_sw
     w_S: float = ranged(0.05, 0, 1000)  # weight of smoothness S [s^2/m^2]
     alpha_per_s: float = ranged(1.5, 0, 1000, lo_open=True)  # CBF gain alpha [1/s]
-    w_eps: float = ranged(1e-3, 0, 1000, lo_open=True)  # regularizer epsilon of Eq. (17) [m^2]
+    w_eps: float = ranged(1e-3, 0, 1000, lo_open=True)  # epsilon of eq:analytic_workload (24) [m^2]
     v_max_mps: float = ranged(0.8, 0, 5, lo_open=True)  # translational speed limit (GOAL, PASS) [m/s]
     v_side_mps: float = ranged(0.55, 0, 5, lo_open=True)  # SIDE-L/R speed limit [m/s]
     v_release_mps: float = ranged(0.3, 0, 5, lo_open=True)  # reverse-release fallback speed [m/s]
@@ -216,8 +219,8 @@ class StackParams:
     relevant_range_m: float = ranged(3.0, 0, 100)  # look-ahead for the locally relevant obstacle [m]
     u_min: Vec3 = ranged((-0.8, -0.8, -1.0), -10, 0)  # actuator box, lower (m/s, m/s, rad/s)
     u_max: Vec3 = ranged((0.8, 0.8, 1.0), 0, 10)  # actuator box, upper (m/s, m/s, rad/s)
-    H_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0, lo_open=True)  # QP weight H of Eq. (19) (diagonal)
-    R_u_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0)  # E_CBF weight R_u of Eq. (20) (diagonal)
+    H_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0, lo_open=True)  # H of eq:hard_cbf_qp (26) (diagonal)
+    R_u_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0)  # R_u of eq:sim_cbf_energy (27) (diagonal)
     dwell_s: float = ranged(1.0, 0, 60)  # minimum dwell time of a selected behavior [s]
     switch_rel: float = ranged(0.10, 0, 100)  # relative switching-improvement threshold [-]
     switch_abs: float = ranged(0.05, 0, 1000)  # absolute part of the switching threshold [-]
@@ -263,7 +266,7 @@ class StackParams:
 
     @property
     def weights(self) -> tuple[float, float, float, float, float]:
-        """(w_W, w_P, w_F, w_sw, w_S) of Eq. (10)."""
+        """(w_W, w_P, w_F, w_sw, w_S) of eq:behavior_cost (14)."""
         return (self.w_W, self.w_P, self.w_F, self.w_sw, self.w_S)
 
 
