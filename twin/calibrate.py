@@ -1,4 +1,4 @@
-"""Calibrate the shared-uncertainty terms of Eq. (15) from a robot log (``bigcbf calibrate``).
+"""Calibrate the shared-uncertainty terms of eq:uncertainty_margin (21) from a robot log (``bigcbf calibrate``).
 
     cal = calibrate_log("drive.mcap")            # topics found by type, or named
     write_profile(cal, "robot.toml")              # the uncertainty profile `bigcbf run --profile` reads
@@ -14,15 +14,15 @@ Steps (each module documents its method):
    percentile of their sum, with its parts;
 2. the saturating execution model (twin.limits): the robot's wheel-speed limit, acceleration limit and
    command-to-wheel latency (dead time per axis, with a confidence interval) identified with the model they break;
-   A, d of Eq. (1) by least squares on the samples the model says have settled below the limits (twin.execution
-   for the axes: those the log does not excite are reported as not identified). When the log reaches a limit the
-   summary says plainly what a linear model fitted across it would claim;
+   A, d of eq:execution (1) by least squares on the samples the model says have settled below the limits
+   (twin.execution for the axes: those the log does not excite are reported as not identified). When the log reaches a
+   limit the summary says plainly what a linear model fitted across it would claim;
 3. residual bound (twin.residual): conformal quantile of ||r_xy|| per command-speed bin on the settled,
    unsaturated samples of the calibration blocks, coverage checked on the held-out time blocks (the error right
-   after a command change is the delay's, which the relative-motion delay term of Eq. (15) covers); the coverage
-   is also reported on every unsaturated held-out sample (transients included) and on every held-out sample
-   (saturated ones too, which Eq. (1) does not describe), and a held-out coverage more than 3 points below the
-   stated one is a warning;
+   after a command change is the delay's, which the relative-motion delay term of eq:uncertainty_margin (21)
+   covers); the coverage is also reported on every unsaturated held-out sample (transients included) and on every
+   held-out sample (saturated ones too, which eq:execution (1) does not describe), and a held-out coverage more than 3
+   points below the stated one is a warning;
 4. e_ZOH (:func:`zoh_displacement`) from the log's command period (the stack's T_C when commands are published
    on change) and measured speeds.
 
@@ -101,7 +101,7 @@ class Calibration:
     axis_bound: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))   # (3,) per-axis residual bound
     axis_coverage: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) its held-out coverage
     rmse_all: dict[str, np.ndarray] = field(default_factory=dict)   # every held-out sample: nominal, identity,
-    #                                                                 linear (Eq. (1)), saturating (the model)
+    #                                                                 linear (eq:execution (1)), saturating
 
     @property
     def latency_s(self) -> np.ndarray:
@@ -226,7 +226,7 @@ class Calibration:
 
 def zoh_displacement(t_cmd, v_xy, period_quantile: float = 0.95, speed_quantile: float = 0.99,
                      period_s: float | None = None):
-    """e_ZOH of Eq. (15): the distance the robot can cover while one command is held, T_C * v.
+    """e_ZOH of eq:uncertainty_margin (21): the distance the robot can cover while one command is held, T_C * v.
 
     T_C = the ``period_quantile`` of the intervals between consecutive commands (messages of one burst merged),
     or ``period_s`` when given (commands published on change have no period: the stack's T_C), v = the
@@ -280,7 +280,7 @@ def _limits_notes(model: SaturatingModel, v_stack: float) -> list[str]:
         if st.v_max < v_stack:
             out.append(f"the stack commands up to {v_stack} m/s, more than this robot's wheels realise "
                        f"({st.v_max:.3f} m/s rim speed): give the stack v_max_mps <= {st.v_max:.2f}, or its "
-                       "commands above that are not executed as Eq. (1) says")
+                       "commands above that are not executed as eq:execution (1) says")
     if dyn.accel_max is not None:
         out.append(f"the wheels' acceleration is limited to {dyn.accel_max:.2f} m/s^2 (rim), after a dead time and a "
                    f"{dyn.lag_s * 1e3:.0f} ms lag")
@@ -423,7 +423,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
                             "the log's residuals are not stationary; calibrate on a longer or steadier log")
     if sat.any() and cov_all < bound.coverage - opt.coverage_warn:
         warnings.append(f"on every held-out sample, saturated ones included, the bound covers {cov_all:.3f}: "
-                        "Eq. (1) does not describe the robot above its wheel limit")
+                        "eq:execution (1) does not describe the robot above its wheel limit")
     cond = input_condition(u0[~held & settled], axes)          # the commands as sent: collinear or not
     if cond > opt.condition_warn:
         warnings.append(f"the commanded axes {', '.join(a for a, x in zip(AXES, axes) if x)} move together "
