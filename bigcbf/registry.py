@@ -1,7 +1,12 @@
-"""Name -> object registries (methods, scenarios, ...). A duplicate name is an error."""
+"""Name -> object registries with metadata: methods, world families, faults, suites. A duplicate name is an error.
+
+An object that carries its own ``name`` (a world family, a fault, a suite) registers with ``reg.add(obj)``, so its
+name is written once, in the object; its ``tags`` (e.g. a suite's splits, a fault's levels) come with it, as
+dm_control's tagged suites and Gymnasium's ``register`` keep metadata beside the name.
+"""
 from __future__ import annotations
 
-from typing import Generic, Iterator, TypeVar
+from typing import Callable, Generic, Iterable, Iterator, TypeVar
 
 from .errors import UserError
 
@@ -12,15 +17,34 @@ class Registry(Generic[T]):
     def __init__(self, kind: str):
         self.kind = kind
         self._items: dict[str, T] = {}
+        self._tags: dict[str, tuple[str, ...]] = {}
 
-    def register(self, name: str, obj: T | None = None):
-        """``reg.register("x", obj)`` or as a decorator ``@reg.register("x")``."""
+    def register(self, name: str, obj: T | None = None, *, tags: Iterable[str] = ()):
+        """``reg.register("x", obj)`` or as a decorator ``@reg.register("x")``; ``tags``: the entry's labels."""
         def add(o: T) -> T:
+            if not isinstance(name, str) or not name:
+                raise ValueError(f"a {self.kind} name is a non-empty string, got {name!r}")
             if name in self._items:
                 raise ValueError(f"duplicate {self.kind} name {name!r}")
             self._items[name] = o
+            self._tags[name] = tuple(tags)
             return o
         return add(obj) if obj is not None else add
+
+    def add(self, obj: T) -> T:
+        """Register ``obj`` under its own ``name`` attribute, with its ``tags`` attribute (if any) as its tags."""
+        return self.register(obj.name, obj, tags=getattr(obj, "tags", ()))
+
+    def remove(self, name: str) -> T:
+        """Take ``name`` out (the undo of a temporary registration: a test's toy entry)."""
+        self._tags.pop(name, None)
+        return self._items.pop(name)
+
+    def sort(self, key: Callable[[T], object]) -> None:
+        """Put the entries in the order of ``key`` (the order ``names()`` and iteration list them)."""
+        ordered = sorted(self._items.items(), key=lambda item: key(item[1]))
+        self._items.clear()
+        self._items.update(ordered)
 
     def get(self, name: str) -> T:
         try:
@@ -28,8 +52,29 @@ class Registry(Generic[T]):
         except KeyError:
             raise UserError(f"unknown {self.kind} {name!r}; known: {', '.join(sorted(self._items))}") from None
 
+    def tags(self, name: str) -> tuple[str, ...]:
+        """The tags ``name`` was registered with (UserError for an unknown name)."""
+        self.get(name)
+        return self._tags.get(name, ())
+
+    def tagged(self, tag: str) -> list[str]:
+        """The names registered with ``tag``, in registration order."""
+        return [n for n in self._items if tag in self._tags.get(n, ())]
+
     def names(self) -> list[str]:
         return list(self._items)
+
+    def values(self) -> list[T]:
+        return list(self._items.values())
+
+    def items(self) -> list[tuple[str, T]]:
+        return list(self._items.items())
+
+    def __getitem__(self, name: str) -> T:
+        return self._items[name]
+
+    def __len__(self) -> int:
+        return len(self._items)
 
     def __contains__(self, name: str) -> bool:
         return name in self._items

@@ -1,4 +1,4 @@
-"""Procedural worlds (bigcbf/worlds.py): every family generates valid, solvable, reproducible scenario files; the
+"""Procedural worlds (bigcbf/worlds/): every family generates valid, solvable, reproducible scenario files; the
 checks reject what they should; the command line writes and lists them."""
 import math
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import matplotlib.image as mpimg
@@ -13,19 +14,21 @@ from bigcbf.bench.runner import BenchConfig, run_bench
 from bigcbf.bench.testing import fake_episode
 from bigcbf.cli import build_parser, main
 from bigcbf.cli.bench import config_from_args
-from bigcbf.worlds import FAMILIES, SPLITS
+from bigcbf.worlds import FAMILIES
 
 
 def test_generated_suite_has_300_worlds_or_more_in_disjoint_splits():
-    assert len(FAMILIES) * sum(map(len, SPLITS.values())) >= 300
-    assert not set(SPLITS["dev"]) & set(SPLITS["test"])
+    assert sum(len(seeds) for fam in FAMILIES.values() for seeds in fam.splits.values()) >= 300
+    assert all(not set(fam.splits["dev"]) & set(fam.splits["test"]) for fam in FAMILIES.values())
 
 
 @pytest.fixture
 def small_splits(monkeypatch):
     """Two dev worlds and one test world per family (generating all 360 takes seconds)."""
-    monkeypatch.setattr(worlds, "SPLITS", {"dev": range(0, 2), "test": range(1000, 1001)})
-    return worlds.SPLITS
+    small = {"dev": range(0, 2), "test": range(1000, 1001)}
+    for name, fam in FAMILIES.items():
+        monkeypatch.setitem(FAMILIES._items, name, dataclasses.replace(fam, splits=small))
+    return small
 
 
 def test_generated_suite_writes_its_worlds_and_selects_a_split(tmp_path, small_splits):
