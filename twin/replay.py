@@ -47,6 +47,7 @@ import numpy as np
 
 from bigcbf.errors import UserError
 from bigcbf.logio import LogData, OdomSeries
+from bigcbf.params.checks import check_field_ranges, ranged
 from bigcbf.params.robot import RobotProfile
 from bigcbf.params.stack import ExecutionModel
 
@@ -55,13 +56,22 @@ from .execution import AXES
 from .timebase import prepare
 
 
+#: the documented range of the pose-drift and fit windows [s] (a shorter window than a tenth of a second holds no
+#: odometry period of a real base; 1e-300 made a replay count windows forever)
+MIN_WINDOW_S = 0.1
+MAX_WINDOW_S = 3600.0
+
+
 @dataclass(frozen=True)
 class ReplayOptions:
-    window_s: float = 5.0           # pose-drift windows [s]
+    window_s: float = ranged(5.0, MIN_WINDOW_S, MAX_WINDOW_S)  # pose-drift windows [s]
     fit: bool = False
-    fit_window_s: float = 20.0      # the part of the log the fit replays [s]
-    fit_evals: int = 40             # replays the fit may spend
-    video_fps: float = 10.0
+    fit_window_s: float = ranged(20.0, MIN_WINDOW_S, MAX_WINDOW_S)  # the part of the log the fit replays [s]
+    fit_evals: int = ranged(40, 1, 10000)  # replays the fit may spend
+    video_fps: float = ranged(10.0, 1, 120)
+
+    def __post_init__(self):
+        check_field_ranges(self)
 
 
 @dataclass
