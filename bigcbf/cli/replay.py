@@ -3,7 +3,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import path_arg, positive_float
+from .argtypes import float_in, path_arg
+
+#: the documented range of --window [s] (twin.replay.MIN_WINDOW_S, MAX_WINDOW_S; tests/test_param_ranges.py checks
+#: that they agree: the CLI does not import the twin just to build its parser)
+MIN_WINDOW_S, MAX_WINDOW_S = 0.1, 3600.0
 
 HELP = "replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted); errors, video"
 
@@ -17,7 +21,8 @@ def add_arguments(p):
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--fit", action="store_true",
                    help="also fit the model's latency, gains and floor friction to the log (slow: ~40 replays)")
-    p.add_argument("--window", type=positive_float, default=5.0, metavar="S", help="pose-drift window in seconds (5)")
+    p.add_argument("--window", type=float_in(MIN_WINDOW_S, MAX_WINDOW_S, "a window in seconds"), default=5.0,
+                   metavar="S", help=f"pose-drift window in seconds (5; in [{MIN_WINDOW_S:g}, {MAX_WINDOW_S:g}))")
     p.add_argument("--cmd-topic", default=None, help="command topic (default: found by type)")
     p.add_argument("--odom-topic", default=None, help="odometry topic (default: found by type)")
     p.add_argument("--save-robot-profile", type=path_arg, default=None, metavar="PATH.toml",
