@@ -1,7 +1,8 @@
 """Reports of a bench: episodes.csv, summary.json, summary.md, success_heatmap.png, cbf_burden.png.
 
 Aggregates (per method, and per method and scenario), over the episodes that ran without error:
-- ``success_pct``: 100 x successful episodes / episodes.
+- ``success_pct``: 100 x successful episodes / episodes; ``success_ci95_pct``: its 95 % Wilson interval [lo, hi]
+  (``bigcbf/bench/stats.py``); ``collision_pct``, ``collision_ci95_pct``: the same for episodes with a contact.
 - ``time_s``: mean completion time of the *successful* episodes (the time to reach the goal; a timeout's time is
   the time limit and says nothing about speed). ``None`` when no episode succeeded.
 - ``min_clearance_m``: mean over episodes of the episode's minimum true clearance: the signed distance between the
@@ -30,7 +31,11 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 
 Suites with splits and families (``generated``) also get ``by_family``: the same figures per method, split and
 family (and over each split, key ``all``), a success table per family in summary.md and a heatmap of method x
-family and split instead of method x scenario. The ``faults`` suite (family: the fault, split: its level) also gets
+family and split instead of method x scenario. ``paired``: each method's success minus the reference method's
+(BIG-CBF when it ran, else the first method) over the episodes both finished (same scene, same seed), with the
+95 % interval of Newcombe's method 10 and the exact McNemar p-value (``bigcbf/bench/stats.py``). Every row of the
+tables names the code versions (``code_sha``) and the configuration hash (``params_hash``) its episodes ran with.
+The ``faults`` suite (family: the fault, split: its level) also gets
 ``by_fault`` (``bigcbf/bench/faults.py``): per fault, level (``none``: its scenes without the fault) and method the
 same figures, and in summary.md collisions and success per method and fault, then a table per fault.
 """
@@ -45,6 +50,7 @@ from typing import Iterable, Sequence
 
 from ..errors import UserError
 from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
+from .stats import fmt_ci, paired_difference, wilson_pct
 from .paper import (METHOD_ORDER, comparability, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
                     TABLE2_KEYS, display, ordered)
 
@@ -72,6 +78,9 @@ def summarize(rows: Iterable[dict]) -> dict:
         "ok": n,
         "errors": len(rows) - n,
         "success_pct": 100.0 * sum(bool(m["success"]) for m in ok) / n if n else None,
+        "success_ci95_pct": wilson_pct(sum(bool(m["success"]) for m in ok), n),
+        "collision_pct": 100.0 * sum(bool(m["collision"]) for m in ok) / n if n else None,
+        "collision_ci95_pct": wilson_pct(sum(bool(m["collision"]) for m in ok), n),
         "time_s": _mean([m["time_s"] for m in ok if m["success"]]),
         "goal_error_m": _mean([m["final_goal_dist_m"] for m in ok if m["success"]]),
         "missed_scans": _mean([m.get("missed_scans") for m in ok]),
@@ -154,7 +163,8 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
                   "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),
                   "ok": sum(r["status"] == "ok" for r in rows), "errors": sum(r["status"] == "error" for r in rows),
                   "code_versions": versions},
-        "methods": {m: summarize(by_m[m]) for m in methods},
+        "methods": {m: {**summarize(by_m[m]), **provenance(by_m[m])} for m in methods},
+        "paired": paired(rows, methods),
         "by_scenario": {m: {s: summarize(r for r in by_m[m] if r["scenario"] == s) for s in scenarios}
                         for m in methods},
         "paper": {"table_ii": {m: PAPER_TABLE_II[m] for m in METHOD_ORDER},
@@ -181,6 +191,34 @@ def default_params_hash(suite: str | None, perception: str = "lidar") -> str | N
         return None
     make = SUITES.get(suite).params if suite in SUITES else None
     return params_key(params_toml(make() if make is not None else RunConfig()), perception)
+
+
+def provenance(rows: Sequence[dict]) -> dict:
+    """The code versions and configuration hashes the rows ran with (sorted, distinct)."""
+    return {"code_versions": sorted({r["code_sha"] for r in rows if r.get("code_sha")}),
+            "params_hashes": sorted({r["params_hash"] for r in rows if r.get("params_hash")})}
+
+
+def reference_method(methods: Sequence[str]) -> str | None:
+    """The method the others are compared with: BIG-CBF when it ran, else the first."""
+    return "big-cbf" if "big-cbf" in methods else (methods[0] if methods else None)
+
+
+def paired(rows: Sequence[dict], methods: Sequence[str]) -> dict:
+    """{"reference": M, "by_method": {method: paired_difference(method, M)}} over the (scenario, seed) pairs both
+    finished without error (:func:`bigcbf.bench.stats.paired_difference`)."""
+    ref = reference_method(methods)
+    done = {}
+    for r in rows:
+        if r["status"] == "ok":
+            done[(r["method"], r["scenario"], r["seed"])] = bool(r["metrics"]["success"])
+    out = {}
+    for m in methods:
+        if m == ref:
+            continue
+        keys = sorted(k[1:] for k in done if k[0] == m and (ref, *k[1:]) in done)
+        out[m] = paired_difference([done[(m, *k)] for k in keys], [done[(ref, *k)] for k in keys])
+    return {"reference": ref, "by_method": out}
 
 
 # --- episodes.csv --------------------------------------------------------------------------------------------------
@@ -257,14 +295,20 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
                   f"({', '.join(b['code_versions'])}; column code_sha of episodes.csv); for consistent numbers, run "
                   "again into a new --out."]
     lines += ["", f"{h}# Aggregate performance (Table II columns)", ""]
-    lines += _table(["Method", "Episodes", "Success (%)", "Time (s)", "Clearance (m)", "E_CBF", "Active (%)",
-                     "QP infeas. (%)", "Collisions", "Planner P95 (ms)"],
-                    ([display(m), str(s["ok"]), _f(s["success_pct"]), _f(s["time_s"]), _f(s["min_clearance_m"]),
-                      _f(s["e_cbf"]), _f(s["cbf_active_pct"]), _f(s["qp_infeasible_pct"]), _f(s["collisions"]),
-                      _f(s["planner_p95_ms"])] for m in methods for s in [per_m[m]]))
-    lines += ["", "Time: mean over successful episodes. Clearance, E_CBF (eq:sim_cbf_energy (27)): means over "
-              "episodes. Active, QP infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall "
-              "time.", ""]
+    lines += _table(["Method", "Episodes", "Success (%) [95 % CI]", "Time (s)", "Clearance (m)", "E_CBF",
+                     "Active (%)", "QP infeas. (%)", "Collisions: n, % [95 % CI]", "Planner P95 (ms)", "Code",
+                     "Config"],
+                    ([display(m), str(s["ok"]), fmt_ci(s["success_pct"], s.get("success_ci95_pct")), _f(s["time_s"]),
+                      _f(s["min_clearance_m"]), _f(s["e_cbf"]), _f(s["cbf_active_pct"]), _f(s["qp_infeasible_pct"]),
+                      f"{s['collisions']}: " + fmt_ci(s.get("collision_pct"), s.get("collision_ci95_pct")),
+                      _f(s["planner_p95_ms"]), ", ".join(s.get("code_versions", [])) or "–",
+                      ", ".join(s.get("params_hashes", [])) or "–"] for m in methods for s in [per_m[m]]))
+    lines += ["", "Success and collisions: the share of the episodes with its 95 % Wilson interval. Time: mean over "
+              "successful episodes. Clearance, E_CBF (eq:sim_cbf_energy (27)): means over episodes. Active, QP "
+              "infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time. Code: the "
+              "code versions the method's episodes ran with; Config: the run configuration's hash (the episode "
+              "key's params_hash).", ""]
+    lines += _paired_lines(summary, h)
     lines += [f"{h}# Chatter and stall", ""]
     lines += _liveness_table(methods, [per_m[m] for m in methods], first="Method")
     lines += ["", LIVENESS_NOTE, ""]
@@ -305,6 +349,24 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
     else:
         lines += _table_ii_lines(summary, methods, scenarios, h)
     return _errors_section(summary, h, lines)
+
+
+def _paired_lines(summary: dict, h: str) -> list[str]:
+    """The paired differences in success against the reference method (summary["paired"])."""
+    pr = summary.get("paired") or {}
+    ref, by = pr.get("reference"), pr.get("by_method") or {}
+    if not by:
+        return []
+    lines = [f"{h}# Paired differences in success (vs {display(ref)})", ""]
+    lines += _table(["Method", "Pairs", f"Only this succeeded", f"Only {display(ref)} succeeded",
+                     "Difference (pp) [95 % CI]", "McNemar p"],
+                    ([display(m), str(d["n"]), str(d["b"]), str(d["c"]), fmt_ci(d["diff_pct"], d["ci95_pct"]),
+                      "–" if d["mcnemar_p"] is None else f"{d['mcnemar_p']:.3g}"] for m, d in by.items()))
+    lines += ["", f"Each method's success minus {display(ref)}'s over the episodes both finished (same scene, same "
+              "seed), in percentage points, with the 95 % interval of Newcombe's method 10 for paired proportions "
+              "and the exact McNemar test of the discordant pairs (bigcbf/bench/stats.py). An interval that excludes "
+              "0 is a significant difference at the 5 % level.", ""]
+    return lines
 
 
 def _errors_section(summary: dict, h: str, lines: list[str]) -> str:
@@ -417,13 +479,14 @@ def _family_sections(summary: dict, h: str) -> list[str]:
                         ([display(m)] + [_f(fam[m][split][f]["success_pct"], 0) for f in families + ["all"]]
                          for m in methods))
         lines += ["", f"{h}# Per family, split {split}", ""]
-        head = ["Method", "Family", "Episodes", "Success (%)", "Collisions", "Timeouts", "Time (s)",
+        head = ["Method", "Family", "Episodes", "Success (%) [95 % CI]", "Collisions", "Timeouts", "Time (s)",
                 "Switches/min", "Reversals (modes)", "Reversals (command)", "No progress (s)"]
         body = []
         for m in methods:
             for f in families + ["all"]:
                 s = fam[m][split][f]
-                body.append([display(m), f, str(s["ok"]), _f(s["success_pct"], 1), _f(s["collisions"]),
+                body.append([display(m), f, str(s["ok"]), fmt_ci(s["success_pct"], s.get("success_ci95_pct")),
+                             _f(s["collisions"]),
                              _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["mode_switches_per_min"], 1),
                              _f(s["side_reversals"]), _f(s["lateral_reversals"]), _f(s["no_progress_s"], 1)])
         lines += _table(head, body, align="ll" + "r" * (len(head) - 2)) + [""]
@@ -489,19 +552,22 @@ def plot_heatmap(summary: dict, path: Path) -> None:
     fam = summary.get("by_family")
     if fam:     # columns: family and split
         cols = [(sp, f) for sp in fam[methods[0]] for f in fam[methods[0]][sp] if f != "all"]
-        z = np.array([[np.nan if (v := fam[m][sp][f]["success_pct"]) is None else v for sp, f in cols]
-                      for m in methods], float)
+        cells = [[fam[m][sp][f] for sp, f in cols] for m in methods]
         scenarios = [f"{f}_({sp})" for sp, f in cols]
     else:
-        z = np.array([[np.nan if (v := summary["by_scenario"][m][s]["success_pct"]) is None else v
-                       for s in scenarios] for m in methods], float)
+        cells = [[summary["by_scenario"][m][s] for s in scenarios] for m in methods]
+    z = np.array([[np.nan if c["success_pct"] is None else c["success_pct"] for c in row] for row in cells], float)
     fig, ax = plt.subplots(figsize=(max(6.5, 2.2 + 1.05 * len(scenarios)), 1.6 + 0.5 * len(methods)), dpi=150)
     im = ax.imshow(z, cmap="RdYlGn", vmin=0, vmax=100, aspect="auto")
     for i in range(len(methods)):
         for j in range(len(scenarios)):
             v = z[i, j]
-            ax.text(j, i, "–" if np.isnan(v) else f"{v:.0f}", ha="center", va="center", fontsize=9,
-                    color="black" if np.isnan(v) or 25 < v < 85 else "white", fontweight="bold")
+            colour = "black" if np.isnan(v) or 25 < v < 85 else "white"
+            ax.text(j, i - 0.1, "–" if np.isnan(v) else f"{v:.0f}", ha="center", va="center", fontsize=9,
+                    color=colour, fontweight="bold")
+            ci = cells[i][j].get("success_ci95_pct")
+            if ci is not None:          # the 95 % Wilson interval under the rate
+                ax.text(j, i + 0.25, f"{ci[0]:.0f}-{ci[1]:.0f}", ha="center", va="center", fontsize=6, color=colour)
     ax.set_xticks(range(len(scenarios)), [s.replace("_", "\n") for s in scenarios], fontsize=8)
     ax.set_yticks(range(len(methods)), [display(m) for m in methods], fontsize=9)
     ax.tick_params(length=0)
@@ -513,8 +579,8 @@ def plot_heatmap(summary: dict, path: Path) -> None:
         ax.set_title(f"Success rate (%) per method, family and split\n({n} seed{'s' if n != 1 else ''} per world, "
                      "paired)", fontsize=10)
     else:
-        ax.set_title(f"Success rate (%) per method and scenario\n({n} seed{'s' if n != 1 else ''} each, paired)",
-                     fontsize=10)
+        ax.set_title(f"Success rate (%) per method and scenario, 95 % interval below\n({n} seed{'s' if n != 1 else ''} "
+                     "each, paired)", fontsize=10)
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.02, label="success (%)")
     fig.tight_layout()
     _savefig(fig, path)

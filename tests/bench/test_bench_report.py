@@ -96,10 +96,11 @@ def test_write_reports(tmp_path):
     assert js["methods"]["cbf-only"]["min_clearance_m"] is None
     # Markdown: Table II columns, per-scenario table, the paper's numbers, the crashed episode
     md = (tmp_path / "summary.md").read_text()
-    for col in ("Success (%)", "Time (s)", "Clearance (m)", "E_CBF", "Active (%)", "QP infeas. (%)", "Collisions",
+    for col in ("Success (%) [95 % CI]", "Time (s)", "Clearance (m)", "E_CBF", "Active (%)", "QP infeas. (%)", "Collisions",
                 "Planner P95 (ms)"):
         assert col in md
-    assert "| BIG-CBF | 2 | 50.00 | 10.00 | 0.40 | 3.00 | 41.67 | 0.33 | 0 | 60.00 |" in md
+    # success 1 of 2 with its Wilson interval, collisions 0 of 2 with theirs; no code version recorded; hash "p"
+    assert "| BIG-CBF | 2 | 50.0 [9.4, 90.5] | 10.00 | 0.40 | 3.00 | 41.67 | 0.33 | 0: 0.0 [0.0, 65.8] | 60.00 | – | p |" in md
     # two made-up scenes at two seeds: the paper's figures are not put beside them, and the page says why
     assert "50.00 / 99.78" not in md and "Not comparable with the paper's Table II" in md
     assert "9 of the paper's 9 scenes not in this bench" in md and "2 seeds per scene, the paper's 50" in md
