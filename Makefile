@@ -10,7 +10,7 @@ export MUJOCO_GL ?= egl
 # test processes (pytest-xdist): one per core
 TEST_WORKERS ?= auto
 
-.PHONY: demo test setup syslibs perf profiles clean wheel-check
+.PHONY: demo test setup syslibs perf profiles clean wheel-check fuzz
 
 setup: syslibs $(STAMP)
 
@@ -50,6 +50,15 @@ perf: setup
 profiles: setup
 	$(VENV)/bin/bigcbf profile simulate --robot-profile x3_sim
 	$(VENV)/bin/bigcbf profile simulate --robot-profile x3_hardware --base physical
+
+# Fuzz every user input through the REAL commands (scripts/fuzz_inputs.py, issue 21): FUZZ_N cases, each a subprocess
+# with a wall and a memory limit; counts per class and family in FUZZ_OUT/summary.md, reproducers in FUZZ_OUT/repro/
+FUZZ_N ?= 1000
+FUZZ_SEED ?= 0
+FUZZ_JOBS ?= 2
+FUZZ_OUT ?= fuzz-out
+fuzz: setup
+	$(PY) scripts/fuzz_inputs.py --n $(FUZZ_N) --seed $(FUZZ_SEED) --jobs $(FUZZ_JOBS) --timeout 120 --out $(FUZZ_OUT)
 
 clean:
 	rm -rf $(VENV) *.egg-info build
