@@ -203,7 +203,7 @@ class Episode:
         if self.planner is not None:
             self.planner.reset(self.seed)
         self.cbf = CbfFilter(params)
-        self.perception = Perception(perception_params)
+        self.perception = Perception(self.world.robot.perception_params(perception_params))   # its laser mount
         self.goal = scenario.goal
         self.observers: list[Callable[[StepRecord], None]] = []
         # results that would be false without a word (bigcbf/sanity.py): warnings beside MuJoCo's, and their lines

@@ -1,9 +1,10 @@
 """Scenario files (scenarios/*.toml): loading, validation, and the paired world a seed draws.
 
 A scenario file holds the robot's start and goal, the time limit, walls, static obstacles, pedestrians, floor
-patches, robot-profile overrides and a description of the design. The robot is the simulated X3 of
-``bigcbf/profiles/x3_sim.toml`` (latency, execution gain and bias, residuals, lateral slip, LiDAR, encoder and gyro
-noise) unless the file names another base profile with ``robot_profile_base`` (a shipped profile's name, e.g.
+patches, robot-profile overrides and a description of the design. The robot is a registered robot folder
+(``model = "NAME"`` in ``[robot]``, ``bigcbf/robots.py``; default ``rosmaster_x3``), and its imperfections and
+sensors are its default profile: for the X3 ``bigcbf/profiles/x3_sim.toml`` (latency, execution gain and bias,
+residuals, lateral slip, LiDAR, encoder and gyro noise) unless the file names another base profile with ``robot_profile_base`` (a shipped profile's name, e.g.
 ``x3_hardware``, or a TOML path relative to the scenario file); its ``[robot_profile]`` table overrides keys of
 that base (nested tables such as ``[robot_profile.lidar]`` key by key). Any number in the file may instead be a
 random range that each seed draws from:
@@ -48,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import PROFILES, SCENARIOS
+from . import PROFILES, SCENARIOS, robots
 from .errors import FieldError, UserError
 from .params.checks import REQUIRED, check_field_ranges, ranged
 from .params.faults import EventSchedule, PedestrianTurn
@@ -102,8 +103,13 @@ def _height(h: float) -> None:
 class RobotSpec:
     start: tuple[float, float, float]        # x [m], y [m], yaw [rad] in odom
     goal: XY                                 # x, y [m]
+    model: str = robots.DEFAULT_ROBOT        # the robot: a registered robot folder (bigcbf/robots.py)
 
     def __post_init__(self):
+        try:
+            robots.check_robot_name(self.model)
+        except ValueError as exc:
+            raise FieldError("model", str(exc)) from None
         _in_world("start", self.start[:2])
         _in_world("goal", self.goal)
         if abs(self.start[2]) > 100.0:
@@ -242,7 +248,7 @@ class Scenario:
             cylinders=tuple(Cylinder(*c.center, c.radius_m, c.height_m) for c in self.cylinders),
             pedestrians=tuple(PedestrianBody(p.name, p.radius_m, 1.7, *p.waypoints[0]) for p in self.pedestrians),
             floor_patches=tuple(FloorPatch(*f.center, *f.half_size, f.friction) for f in self.floor_patches),
-            goal=self.robot.goal, robot_start=self.robot.start, extent=self.extent_m)
+            goal=self.robot.goal, robot_start=self.robot.start, extent=self.extent_m, robot=self.robot.model)
 
 
 # --- random ranges -----------------------------------------------------------------------------------------------
@@ -284,8 +290,21 @@ DEFAULT_ROBOT_PROFILE = "x3_sim"
 
 
 def profile_files() -> dict[str, Path]:
-    """The robot profiles shipped in bigcbf/profiles/, by name (the file stem)."""
-    return {p.stem: p for p in sorted(PROFILES.glob("*.toml"))}
+    """The robot profiles shipped in bigcbf/profiles/ and in each robot folder's profiles/, by name (the file
+    stem; bigcbf/profiles/ first)."""
+    out: dict[str, Path] = {}
+    for folder in (PROFILES, *robots.profile_folders()):
+        for p in sorted(folder.glob("*.toml")):
+            out.setdefault(p.stem, p)
+    return out
+
+
+def default_profile(raw: dict) -> str:
+    """The base robot profile of a scenario file that names none: its robot's (``[robot] model``; an unknown
+    robot falls back to the X3's, and the Scenario's validation reports the robot)."""
+    model = raw["robot"].get("model") if isinstance(raw.get("robot"), dict) else None
+    return robots.ROBOTS[model].profile if isinstance(model, str) and model in robots.ROBOTS \
+        else DEFAULT_ROBOT_PROFILE
 
 
 def robot_profile_path(ref: str, scenario_file: str | Path | None = None) -> Path:
@@ -375,7 +394,7 @@ def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_te
     draws_as = raw.pop("draws_as", name)
     if not isinstance(draws_as, str) or not draws_as:
         raise UserError("expected a scenario name (a non-empty string)", file=str(path), field="draws_as")
-    base_ref = raw.pop("robot_profile_base", DEFAULT_ROBOT_PROFILE)
+    base_ref = raw.pop("robot_profile_base", default_profile(raw))
     if not isinstance(base_ref, str):
         raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),
                         field="robot_profile_base")
@@ -399,7 +418,7 @@ def base_profile_text(name_or_file: str | Path) -> tuple[Path, str]:
     """The base robot profile a scenario file refers to: its path and text (for the bench's episode key)."""
     path = resolve_path(name_or_file)
     raw = load_toml(path)
-    ref = raw.get("robot_profile_base", DEFAULT_ROBOT_PROFILE)
+    ref = raw.get("robot_profile_base", default_profile(raw))
     if not isinstance(ref, str):
         raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),
                         field="robot_profile_base")

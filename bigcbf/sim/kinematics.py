@@ -14,6 +14,11 @@ achieved twist differs slightly per axis from the ideal formula, as on a real Me
 with per-axis effective scales ``(kx, ky, kw)`` measured on the model (``tests/test_robot.py`` re-measures them
 and fails if they drift by more than 1 %): the command ``u`` is realised by the wheel speeds ``J (u / k)``, and
 odometry reports ``k * (J^+ w)``.
+
+A robot's values come from its MJCF (``bigcbf.robots.robot(name).kinematics``: wheel positions, the rollers'
+envelope, the roller angles, which must be this "X" arrangement at 45 degrees, the actuators' speed limit and the
+``effective_scale`` custom numeric); the defaults below are the Rosmaster X3's (``tests/test_robot_folder.py``
+checks that they equal what its MJCF gives).
 """
 from __future__ import annotations
 
@@ -28,7 +33,8 @@ class MecanumKinematics:
     half_track_m: float = 0.0845
     rolling_radius_m: float = 0.0425
     max_wheel_speed_rad_s: float = 30.0
-    #: achieved / ideal twist per axis (vx, vy, wz), measured on assets/rosmaster_x3 (see module docstring)
+    #: achieved / ideal twist per axis (vx, vy, wz), measured on assets/rosmaster_x3 (see module docstring; the
+    #: model's <custom><numeric name="effective_scale">)
     effective_scale: tuple[float, float, float] = (0.991, 0.962, 0.998)
 
     @property

@@ -15,10 +15,11 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-from .. import ASSETS
+from .. import robots
 
-ROBOT_DIR = ASSETS / "rosmaster_x3"
-ROBOT_XML = ROBOT_DIR / "rosmaster_x3.xml"
+#: the default robot's folder and files (``bigcbf/robots.py``: every robot is a folder; ``SceneSpec.robot`` picks one)
+ROBOT_DIR = robots.folder(robots.DEFAULT_ROBOT)
+ROBOT_XML = ROBOT_DIR / f"{robots.DEFAULT_ROBOT}.xml"
 SCENE_XML = ROBOT_DIR / "scene.xml"
 
 WALL_RGBA = (0.72, 0.70, 0.66, 1.0)
@@ -88,6 +89,10 @@ class SceneSpec:
     robot_start: tuple[float, float, float] = (0.0, 0.0, 0.0)
     extent: float = 6.0
     extras: dict = field(default_factory=dict, compare=False)
+    robot: str = robots.DEFAULT_ROBOT      # the registered robot (bigcbf/robots.py) the scene is composed on
+
+    def __post_init__(self):
+        robots.folder(self.robot)          # an unknown robot: one UserError listing the known ones
 
 
 GROUND_CONTACT = dict(contype=1, conaffinity=2)      # touches the robot's rollers
@@ -101,8 +106,9 @@ def _world_geom(parent, ground: bool = False, **kw):
 
 
 def compose(spec: SceneSpec) -> mjcf.RootElement:
-    """The MJCF scene (robot + floor + the scene's geometry) as a dm_control.mjcf element tree."""
-    root = mjcf.from_path(str(SCENE_XML))
+    """The MJCF scene (the robot's scene.xml: robot + floor; and the scene's geometry) as a dm_control.mjcf element
+    tree."""
+    root = mjcf.from_path(str(robots.scene_path(spec.robot)))
     wb = root.worldbody
     if spec.floor_friction is not None:
         root.find("geom", "floor").friction = (spec.floor_friction, 0.005, 0.0001)

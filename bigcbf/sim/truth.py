@@ -18,7 +18,6 @@ covers them). The clearance metric measures the real body instead, so that it ag
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -27,7 +26,7 @@ import numpy as np
 
 from ..perception.ground_truth import ground_truth_obstacles, rectangle_segments
 from ..types import Obstacles
-from .scene import OBSTACLE_CONTACT, SCENE_XML, SceneSpec
+from .scene import OBSTACLE_CONTACT, SceneSpec
 
 #: obstacles must be at least this tall [m]: the robot's bumper spans 0.0075-0.078 m above the floor, so a taller
 #: obstacle meets the body wherever the planar outlines overlap (a lower one could pass under it)
@@ -82,10 +81,11 @@ def outline_from_model(model: mujoco.MjModel, body: str = "base_link") -> Outlin
     return Outline(float(h[0]), float(h[1]), float(c[0]), float(c[1]))
 
 
-@functools.lru_cache(maxsize=1)
-def robot_outline() -> Outline:
-    """The shipped robot's collision outline (0.30 x 0.20 m), from its MJCF (compiled once)."""
-    return outline_from_model(mujoco.MjModel.from_xml_path(str(SCENE_XML)))
+def robot_outline(robot: str = "rosmaster_x3") -> Outline:
+    """A registered robot's collision outline (the Rosmaster X3's: 0.30 x 0.20 m), from its MJCF (compiled once;
+    ``bigcbf.robots.robot``)."""
+    from ..robots import robot as registered
+    return registered(robot).outline
 
 
 def _rect_corners(c: np.ndarray, h: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
@@ -170,7 +170,7 @@ class Clearance:
     """Signed distances between the robot's outline at a pose and a scene's obstacles (module docstring)."""
 
     def __init__(self, scene: SceneSpec, outline: Outline | None = None):
-        self.outline = robot_outline() if outline is None else outline
+        self.outline = robot_outline(scene.robot) if outline is None else outline
         rects, names = [], []
         for k, w in enumerate(scene.walls):
             a, b = np.array([w.x0, w.y0]), np.array([w.x1, w.y1])

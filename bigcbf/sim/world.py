@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from ..params.robot import RobotProfile
+from ..robots import robot as registered_robot
 from ..types import LaserScan, RobotState
 from .faults import LidarFaults
 from .firmware import Encoders, Gyro, ImperfectionLayer, WheelOdometry
@@ -21,6 +22,7 @@ from .kinematics import MecanumKinematics
 from .lidar import Lidar, LidarConfig
 from .scene import SceneSpec, build_model, open_room
 
+#: the default robot's wheels (fl, fr, rl, rr); a SimWorld takes its robot's from ``bigcbf.robots`` (``world.robot``)
 WHEELS = ("fl", "fr", "rl", "rr")
 
 
@@ -38,10 +40,16 @@ class SimWorld:
                "latency_spikes", "wheel_noise")
 
     def __init__(self, scene: SceneSpec | None = None, profile: RobotProfile = RobotProfile(), seed: int = 0,
-                 lidar: LidarConfig | None = None, kinematics: MecanumKinematics = MecanumKinematics(),
+                 lidar: LidarConfig | None = None, kinematics: MecanumKinematics | None = None,
                  model: mujoco.MjModel | None = None):
-        """``lidar``: the LiDAR's configuration; None takes the robot profile's LiDAR model."""
+        """``lidar``: the LiDAR's configuration; None takes the robot profile's LiDAR model. The robot is the
+        scene's (``SceneSpec.robot``, a folder of ``bigcbf/robots.py``): its MJCF gives the model, the wheel
+        actuators and ``kinematics`` (None: the robot's, read from its MJCF)."""
         self.scene = scene or open_room()
+        #: the robot as its MJCF describes it (bigcbf.robots.Robot): wheels, kinematics, outline, sensor mounts
+        self.robot = registered_robot(self.scene.robot)
+        if kinematics is None:
+            kinematics = self.robot.kinematics
         if profile.floor_friction is not None:
             from dataclasses import replace
             self.scene = replace(self.scene, floor_friction=profile.floor_friction)
@@ -65,9 +73,9 @@ class SimWorld:
         self.encoders = Encoders(profile.odometry, rng=rng["wheel_noise"])
         self.gyro = Gyro(profile.imu, rng["gyro_noise"], rng["gyro_bias"])
         m = self.model
-        self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{w}_wheel") for w in WHEELS])
-        self._wheel_dof = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{w}_wheel")]
-                                    for w in WHEELS])
+        self._act = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in self.robot.actuators])
+        self._wheel_dof = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
+                                    for j in self.robot.wheels])
         self._base = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base_link")
         root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")
         self._qadr, self._vadr = m.jnt_qposadr[root], m.jnt_dofadr[root]
@@ -203,11 +211,9 @@ class SimWorld:
             out[frame] = (x, y, z + base_z, _yaw(m.site_quat[k]))
         return out
 
-    @staticmethod
-    def robot_description() -> str:
-        """The robot model's text (MJCF, the file the scenes include)."""
-        from .scene import ROBOT_XML
-        return ROBOT_XML.read_text()
+    def robot_description(self) -> str:
+        """The robot model's text (its MJCF, the file the robot's scene.xml includes)."""
+        return self.robot.xml.read_text()
 
     def scan(self) -> LaserScan | None:
         """The LiDAR scan now; None when the robot profile's scan dropout loses it (``[faults.scan_dropout]``);
