@@ -56,7 +56,7 @@ profiles: setup
 FUZZ_N ?= 1000
 FUZZ_SEED ?= 0
 FUZZ_JOBS ?= 2
-FUZZ_OUT ?= fuzz-out
+FUZZ_OUT ?= renders/fuzz
 fuzz: setup
 	$(PY) scripts/fuzz_inputs.py --n $(FUZZ_N) --seed $(FUZZ_SEED) --jobs $(FUZZ_JOBS) --timeout 120 --out $(FUZZ_OUT)
 
