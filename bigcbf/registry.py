@@ -32,8 +32,9 @@ class Registry(Generic[T]):
         return add(obj) if obj is not None else add
 
     def add(self, obj: T) -> T:
-        """Register ``obj`` under its own ``name`` attribute, with its ``tags`` attribute (if any) as its tags."""
-        return self.register(obj.name, obj, tags=getattr(obj, "tags", ()))
+        """Register ``obj`` under its own ``name`` attribute; its tags are its ``tags`` attribute (if any), read
+        when asked (a suite whose splits follow the registered world families stays current)."""
+        return self.register(obj.name, obj)
 
     def remove(self, name: str) -> T:
         """Take ``name`` out (the undo of a temporary registration: a test's toy entry)."""
@@ -53,13 +54,13 @@ class Registry(Generic[T]):
             raise UserError(f"unknown {self.kind} {name!r}; known: {', '.join(sorted(self._items))}") from None
 
     def tags(self, name: str) -> tuple[str, ...]:
-        """The tags ``name`` was registered with (UserError for an unknown name)."""
-        self.get(name)
-        return self._tags.get(name, ())
+        """The tags ``name`` was registered with, else its object's ``tags`` (UserError for an unknown name)."""
+        obj = self.get(name)
+        return self._tags.get(name) or tuple(getattr(obj, "tags", ()))
 
     def tagged(self, tag: str) -> list[str]:
-        """The names registered with ``tag``, in registration order."""
-        return [n for n in self._items if tag in self._tags.get(n, ())]
+        """The names with ``tag`` among their tags, in registration order."""
+        return [n for n in self._items if tag in self.tags(n)]
 
     def names(self) -> list[str]:
         return list(self._items)

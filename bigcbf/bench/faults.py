@@ -35,6 +35,10 @@ still assumes the X3's range noise under ``lidar_noise``). The report (``bigcbf/
 and collisions per method, fault and level (each fault's ``none`` column: its scenes without the fault); results
 of a 2-seed run in docs/benchmark.md ("The faults suite"). A SuiteEntry's family is the fault (``none`` for the shipped scenes)
 and its split the level; ``bigcbf bench --suite faults --split severe`` runs one level.
+
+Each fault is written once, in its :class:`Fault` registered in :data:`FAULTS` (its levels are its tags); the suite
+(``bigcbf/bench/suites.py``), the report and the tests read the names from there. This module imports no other
+module of the bench: the report passes its ``summarize`` to :func:`by_fault`.
 """
 from __future__ import annotations
 
@@ -42,6 +46,7 @@ import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..registry import Registry
 from ..worlds import toml_key, toml_value
 
 LEVELS = ("mild", "severe")
@@ -63,8 +68,16 @@ class Fault:
     scenes: tuple[str, ...]
     levels: dict[str, Level]
 
+    @property
+    def tags(self) -> tuple[str, ...]:
+        """Its registry tags: its levels."""
+        return tuple(self.levels)
 
-FAULTS: dict[str, Fault] = {f.name: f for f in (
+
+#: name -> Fault, in the order the suite writes and the report lists them
+FAULTS: Registry[Fault] = Registry("fault")
+
+for _fault in (
     Fault("lidar_noise", "LiDAR range noise (Gaussian, std growing with the range)",
           ("multi_static_clutter", "crowd_crossing"),
           {"mild": Level("range noise std 0.02 m + 1 % of the range",
@@ -113,7 +126,9 @@ FAULTS: dict[str, Fault] = {f.name: f for f in (
                                               "random_side": True}}),
            "severe": Level("180 deg (turns back) for 2 s at 0.2 per second per pedestrian",
                            pedestrian={"turn": {"rate_per_s": 0.2, "duration_s": 2.0, "angle_deg": 180.0}})}),
-)}
+):
+    FAULTS.add(_fault)
+del _fault
 
 
 def scenes() -> list[str]:
@@ -241,12 +256,11 @@ def write_variants(out: Path, levels=None) -> list[tuple[Path, str, str]]:
 
 # --- the report's tables ---------------------------------------------------------------------------------------------
 
-def by_fault(rows, methods, groups: dict) -> dict:
+def by_fault(rows, methods, groups: dict, summarize) -> dict:
     """{fault: {"scenes": [...], "levels": {level: {method: summary}}}} for the faults present in ``groups``
     (scenario name -> {"split": level, "family": fault}); level ``none`` is the fault's scenes without it (the
-    rows of the shipped scenes, family ``none``)."""
-    from .report import summarize
-
+    rows of the shipped scenes, family ``none``). ``summarize``: the report's aggregate of a group of result rows
+    (``bigcbf.bench.report.summarize``, passed in so that this module needs nothing of the report's)."""
     present = [f for f in FAULTS if any(g["family"] == f for g in groups.values())]
     out = {}
     for fname in present:
@@ -264,18 +278,6 @@ def by_fault(rows, methods, groups: dict) -> dict:
         out[fname] = {"scenes": list(f.scenes), "description": f.description,
                       "levels_described": {lv: x.summary for lv, x in f.levels.items()}, "levels": levels}
     return out
-
-
-def _suite_entries(out: Path, split: str | None = None):
-    from .suites import SuiteEntry
-
-    entries = []
-    if split in (None, REFERENCE):
-        entries += [SuiteEntry(s, REFERENCE, REFERENCE) for s in scenes()]
-    if split != REFERENCE:
-        entries += [SuiteEntry(str(p), level, fault)
-                    for p, level, fault in write_variants(out, None if split is None else [split])]
-    return entries
 
 
 __all__ = ["FAULTS", "LEVELS", "REFERENCE", "Fault", "Level", "scenes", "variant_name", "variant_text",

@@ -157,7 +157,7 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
         extra = {"groups": groups, "by_family": by_family(rows, methods, scenarios, groups)}
         from .faults import FAULTS, by_fault
         if any(g["family"] in FAULTS for g in groups.values()):      # the faults suite (or some of its files)
-            extra["by_fault"] = by_fault(rows, methods, groups)
+            extra["by_fault"] = by_fault(rows, methods, groups, summarize)
     return {
         "bench": {**(info or {}), "methods": list(methods), "scenarios": list(scenarios), "seeds": list(seeds),
                   "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),

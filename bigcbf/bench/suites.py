@@ -5,7 +5,11 @@ by default, and optionally the stack parameters it is meant for (e.g. a hardware
 their worlds write them as ordinary scenario TOML files into the bench's output directory, so every world can be
 inspected and rerun with ``bigcbf run FILE``. No code path of the stack knows which suite or scene it runs.
 
-Suites register in ``SUITES`` by name (a duplicate name is an error).
+Suites register in ``SUITES`` under their own name (``SUITES.add(Suite(name=...))``, a duplicate name is an error);
+their splits are their tags. The names they are made of are written once, elsewhere, and read from there: the
+world families and their splits from ``bigcbf.worlds.FAMILIES``, the faults and their levels from
+``bigcbf.bench.faults.FAULTS``, the paper's scenes from ``bigcbf.bench.paper``. This module imports the faults
+(and the worlds), never the report: the bench's modules import one another without a circle.
 """
 from __future__ import annotations
 
@@ -13,7 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .. import worlds
 from ..registry import Registry
+from . import faults
 
 
 @dataclass(frozen=True)
@@ -37,8 +43,19 @@ class Suite:
     default_seeds: int = 50
     #: the stack parameters the suite is meant for (None: the default profile); ``--profile`` overrides it
     params: Callable[[], object] | None = None
-    #: the splits its entries belong to (``bigcbf bench --split NAME`` runs one); () for a suite without splits
-    splits: tuple[str, ...] = ()
+    #: the names of the splits its entries belong to, or a function that tells them (read when asked, e.g. the
+    #: splits of the world families registered now); () for a suite without splits
+    split_names: tuple[str, ...] | Callable[[], tuple[str, ...]] = ()
+
+    @property
+    def splits(self) -> tuple[str, ...]:
+        """The splits its entries belong to (``bigcbf bench --split NAME`` runs one); () without splits."""
+        return tuple(self.split_names() if callable(self.split_names) else self.split_names)
+
+    @property
+    def tags(self) -> tuple[str, ...]:
+        """Its registry tags: its splits."""
+        return self.splits
 
 
 SUITES: Registry[Suite] = Registry("suite")
@@ -49,18 +66,18 @@ def _paper(out: Path) -> list[SuiteEntry]:
     return [SuiteEntry(name) for name in SCENARIO_ORDER]
 
 
-SUITES.register("paper", Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
+SUITES.add(Suite("paper", "the paper's nine simulation scenarios (Sec. IV, Table II)", _paper))
 
 
 def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
-    from ..worlds import suite_worlds
     return [SuiteEntry(str(path), sp, family)
-            for path, sp, family in suite_worlds(out, None if split is None else [split])]
+            for path, sp, family in worlds.suite_worlds(out, None if split is None else [split])]
 
 
-SUITES.register("generated", Suite(
-    "generated", "procedural worlds (bigcbf/worlds.py): 6 families x (30 dev + 30 test) worlds, written to "
-    "DIR/worlds/, one seed each", _generated, default_seeds=1, splits=("dev", "test")))
+SUITES.add(Suite(
+    "generated", "procedural worlds (bigcbf/worlds/, one module per family): every registered family at the seeds of "
+    "each of its splits, written to DIR/worlds/<split>/, one seed each", _generated, default_seeds=1,
+    split_names=worlds.split_names))
 
 
 def _hardware(out: Path) -> list[SuiteEntry]:
@@ -76,18 +93,25 @@ def _hardware_params():
     return default_stack_params("x3_hardware", base=PHYSICAL)
 
 
-SUITES.register("hardware", Suite(
+SUITES.add(Suite(
     "hardware", "the paper's three hardware scenes (Sec. V, Table III) at a lab's scale, with the physical preset "
     "and a real X3-class robot profile", _hardware, default_seeds=20, params=_hardware_params))
 
 
 def _faults(out: Path, split: str | None = None) -> list[SuiteEntry]:
-    from .faults import _suite_entries
-    return _suite_entries(out, split)
+    """The shipped scenes the faults use (split and family ``none``), then every fault's variants (family: the
+    fault, split: its level), written to ``out/faults/``."""
+    entries = []
+    if split in (None, faults.REFERENCE):
+        entries += [SuiteEntry(s, faults.REFERENCE, faults.REFERENCE) for s in faults.scenes()]
+    if split != faults.REFERENCE:
+        entries += [SuiteEntry(str(p), level, fault)
+                    for p, level, fault in faults.write_variants(out, None if split is None else [split])]
+    return entries
 
 
-SUITES.register("faults", Suite(
-    "faults", "every method under LiDAR noise, scan dropout, a blanked sector, latency spikes, odometry drift, "
-    "pedestrians that stop or turn (bigcbf/bench/faults.py), mild and severe, on shipped scenes where each matters, "
-    "beside the same scenes without the fault; files written to DIR/faults/", _faults, default_seeds=5,
-    splits=("none", "mild", "severe")))
+SUITES.add(Suite(
+    "faults", f"every method under each fault of bigcbf/bench/faults.py ({', '.join(faults.FAULTS)}), at each level "
+    f"({', '.join(faults.LEVELS)}), on shipped scenes where each matters, beside the same scenes without the fault "
+    "(split and family none); files written to DIR/faults/", _faults, default_seeds=5,
+    split_names=(faults.REFERENCE, *faults.LEVELS)))
