@@ -354,14 +354,14 @@ def mutate_log(rng: random.Random, data: bytes) -> tuple[bytes, str, dict]:
             times[a], times[b] = times[b], times[a]
         for i, t in zip(idx, times):
             msgs[i] = (msgs[i][0], t, t, msgs[i][3])
-        desc, exp = f"reorder {k} pairs of {topic} times", {"reordered": True}
+        desc, exp = f"reorder {k} pairs of {topic} times", {"reordered": True, "topic": topic}
     elif kind == "reverse":
         topic = rng.choice(["/cmd_vel", "/odom"])
         idx = [i for i, m in enumerate(msgs) if m[0] == topic]
         times = [msgs[i][1] for i in idx][::-1]
         for i, t in zip(idx, times):
             msgs[i] = (msgs[i][0], t, t, msgs[i][3])
-        desc, exp = f"reverse the times of {topic}", {"reordered": True}
+        desc, exp = f"reverse the times of {topic}", {"reordered": True, "topic": topic}
     elif kind == "drop":
         drop = rng.sample(topics, rng.randint(1, 3))
         msgs = [m for m in msgs if m[0] not in drop]
@@ -1011,9 +1011,10 @@ def false_result_flags(case: Case, stdout: str, stderr: str) -> list[str]:
         flags.append("non-finite number in the JSON")
     if kind in ("run", "gym") and "success" in obj:
         d, t = obj.get("final_goal_dist_m"), obj.get("time_s")
-        if obj["success"] and isinstance(d, (int, float)) and d > 2 * EPS_G_DEFAULT:
+        if obj["success"] and isinstance(d, (int, float)) and d > 2 * EPS_G_DEFAULT and not warned:
             flags.append(f"success {d:.2f} m from the goal")
-        if obj["success"] and isinstance(t, (int, float)) and t < 0.5 and case.expect.get("d0", 1) > 2 * EPS_G_DEFAULT:
+        if (obj["success"] and isinstance(t, (int, float)) and t < 0.5 and case.expect.get("d0", 1) > 2 * EPS_G_DEFAULT
+                and not warned):
             flags.append(f"success at t = {t:.2f} s")
         d0, sim = case.expect.get("d0"), obj.get("sim_time_s") or 0
         if (d0 is not None and isinstance(d, (int, float)) and abs(d - d0) < 0.02 and sim >= 1.0
@@ -1038,7 +1039,7 @@ def false_result_flags(case: Case, stdout: str, stderr: str) -> list[str]:
             flags.append(f"out-of-order log times calibrated without a warning (tau95 = {tau})")
     if kind in ("calibrate", "replay") and case.expect.get("truncated") and not warned:
         flags.append("a truncated log read without a warning")
-    if kind == "replay" and case.expect.get("reordered") and not warned:
+    if kind == "replay" and case.expect.get("reordered") and case.expect.get("topic") != "/scan" and not warned:
         flags.append("out-of-order log times replayed without a warning")
     return flags
 
@@ -1062,14 +1063,15 @@ def signature(cls: str, stderr: str, flags: list[str]) -> str:
         frames = re.findall(r'File "([^"]+)", line (\d+), in (\S+)', stderr)
         exc = [ln for ln in stderr.strip().splitlines() if re.match(r"^[A-Za-z_.]+(Error|Exception|Exit|Interrupt)"
                                                                       r"\b|^[A-Za-z_.]+Error:", ln)]
-        last = frames[-1] if frames else ("?", "?", "?")
+        own = [f for f in frames if "site-packages" not in f[0] and "/lib/python" not in f[0]]
+        last = (own or frames or [("?", "?", "?")])[-1]
         etype = exc[-1].split(":")[0] if exc else "?"
         return f"{cls}: {etype} at {Path(last[0]).name}:{last[1]} in {last[2]}"
     if cls == "worker-error":
         m = re.search(r"^(\w+):.*?\(at ([^)]*)\)", flags[0] if flags else "")
         return f"worker-error: {m.group(1)} at {m.group(2)}" if m else f"worker-error: {(flags or ['?'])[0][:80]}"
     if cls in ("data-loss", "half-written", "false-result"):
-        return f"{cls}: {re.sub(r'[0-9.e+-]+', 'N', flags[0]) if flags else '?'}"
+        return f"{cls}: {re.sub(r'[-+]?\d[\d.e+-]*', 'N', flags[0]) if flags else '?'}"
     if cls == "messy-error":
         return f"messy-error: {flags[0] if flags else '?'}"
     return cls
