@@ -1058,6 +1058,9 @@ def _bench_errors(folder: Path, outs: list[str]) -> list[str]:
     return errs
 
 
+NUM_RE = re.compile(r"[-+]?\d[\d.e+-]*")
+
+
 def signature(cls: str, stderr: str, flags: list[str]) -> str:
     if cls in ("traceback", "killed-memory"):
         frames = re.findall(r'File "([^"]+)", line (\d+), in (\S+)', stderr)
@@ -1071,7 +1074,7 @@ def signature(cls: str, stderr: str, flags: list[str]) -> str:
         m = re.search(r"^(\w+):.*?\(at ([^)]*)\)", flags[0] if flags else "")
         return f"worker-error: {m.group(1)} at {m.group(2)}" if m else f"worker-error: {(flags or ['?'])[0][:80]}"
     if cls in ("data-loss", "half-written", "false-result"):
-        return f"{cls}: {re.sub(r'[-+]?\d[\d.e+-]*', 'N', flags[0]) if flags else '?'}"
+        return f"{cls}: {NUM_RE.sub('N', flags[0]) if flags else '?'}"
     if cls == "messy-error":
         return f"messy-error: {flags[0] if flags else '?'}"
     return cls
