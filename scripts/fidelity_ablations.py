@@ -40,7 +40,8 @@ class Row:
 
 
 ROWS = [
-    Row("pass_offset", "PASS offset from the relevant obstacle's group vs Eq. (7) per obstacle", STATIC, "no_groups"),
+    Row("pass_offset", "PASS offset from the relevant obstacle's group vs eq:behavior_subgoals (10) per obstacle",
+        STATIC, "no_groups"),
     Row("side_commitment", "side commitment in the selection vs plain lowest J", STATIC + ("single_person_crossing",),
         "no_side_commitment"),
     Row("cbf_rows", "CBF rows: tracks + nearest wall point per 8 sectors vs every obstacle a row", NARROW,
