@@ -8,28 +8,10 @@
 """
 from __future__ import annotations
 
-import time
-
-import mujoco
-
 from .episode import Episode
 from .params.stack import SIMULATION
 from .scenario import load_scenario
-
-
-def _bare_physics_realtime_factor(model: mujoco.MjModel, n_steps: int) -> float:
-    """Simulated seconds per wall second of n_steps bare mj_step calls of ``model`` from its initial state, the
-    wheels driven at constant targets (the robot rolls forward, as in an episode)."""
-    d = mujoco.MjData(model)
-    mujoco.mj_forward(model, d)
-    d.ctrl[:] = 5.0                       # the four wheel velocity targets [rad/s]
-    t0 = time.perf_counter()
-    done = 0
-    while done < n_steps:
-        nb = min(1000, n_steps - done)
-        mujoco.mj_step(model, d, nb)
-        done += nb
-    return n_steps * model.opt.timestep / (time.perf_counter() - t0)
+from .sim.perf import bare_physics_realtime_factor
 
 
 def bench(quick: bool = False) -> dict:
@@ -39,7 +21,7 @@ def bench(quick: bool = False) -> dict:
     model = ep.world.model
     n_steps = max(1, int(round(res.sim_time_s / model.opt.timestep)))
     episode_rf = res.sim_time_s / res.wall_time_s
-    physics_rf = _bare_physics_realtime_factor(model, n_steps)
+    physics_rf = bare_physics_realtime_factor(model, n_steps)
     return {"episode_realtime_factor": round(episode_rf, 2),
             "episode_physics_realtime_factor": round(physics_rf, 2),
             "episode_physics_ratio": round(episode_rf / physics_rf, 3),

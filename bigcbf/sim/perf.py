@@ -10,6 +10,21 @@ from .scene import SCENE_XML, Cylinder, SceneSpec, Wall
 from .world import SimWorld
 
 
+def bare_physics_realtime_factor(model: mujoco.MjModel, n_steps: int) -> float:
+    """Simulated seconds per wall second of n_steps bare mj_step calls of ``model`` from its initial state, the
+    wheels driven at constant targets (the robot rolls forward, as in an episode)."""
+    d = mujoco.MjData(model)
+    mujoco.mj_forward(model, d)
+    d.ctrl[:] = 5.0                       # the four wheel velocity targets [rad/s]
+    t0 = time.perf_counter()
+    done = 0
+    while done < n_steps:
+        nb = min(1000, n_steps - done)
+        mujoco.mj_step(model, d, nb)
+        done += nb
+    return n_steps * model.opt.timestep / (time.perf_counter() - t0)
+
+
 def bench(quick: bool = False) -> dict:
     m = mujoco.MjModel.from_xml_path(str(SCENE_XML))
     d = mujoco.MjData(m)
