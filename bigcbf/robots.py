@@ -197,7 +197,8 @@ def robot(name: str = DEFAULT_ROBOT) -> Robot:
         if not env:
             raise _bad(name, f"the wheel of actuator {a} has no rollers")
         wheels[key] = (mujoco.mj_id2name(m, obj.mjOBJ_JOINT, j), mujoco.mj_id2name(m, obj.mjOBJ_ACTUATOR, a),
-                       (x, y), r(np.mean(env)), round(float(np.mean(slopes)), 4), float(np.ptp(env)), float(np.ptp(slopes)),
+                       (x, y), r(np.mean(env)), round(float(np.mean(slopes)), 4), float(np.ptp(env)),
+                       float(np.ptp(slopes)),
                        float(m.actuator_ctrlrange[a, 1]) if m.actuator_ctrllimited[a] else math.inf)
     if len(wheels) != 4:
         raise _bad(name, f"bigcbf's Mecanum kinematics takes four wheels, the model drives {len(wheels)}")

@@ -4,9 +4,9 @@ A scenario file holds the robot's start and goal, the time limit, walls, static 
 patches, robot-profile overrides and a description of the design. The robot is a registered robot folder
 (``model = "NAME"`` in ``[robot]``, ``bigcbf/robots.py``; default ``rosmaster_x3``), and its imperfections and
 sensors are its default profile: for the X3 ``bigcbf/profiles/x3_sim.toml`` (latency, execution gain and bias,
-residuals, lateral slip, LiDAR, encoder and gyro noise) unless the file names another base profile with ``robot_profile_base`` (a shipped profile's name, e.g.
-``x3_hardware``, or a TOML path relative to the scenario file); its ``[robot_profile]`` table overrides keys of
-that base (nested tables such as ``[robot_profile.lidar]`` key by key). Any number in the file may instead be a
+residuals, lateral slip, LiDAR, encoder and gyro noise) unless the file names another base profile with
+``robot_profile_base`` (a shipped profile's name, e.g. ``x3_hardware``, or a TOML path relative to the scenario
+file); its ``[robot_profile]`` table overrides keys of that base (nested tables such as ``[robot_profile.lidar]`` key by key). Any number in the file may instead be a
 random range that each seed draws from:
 
     speed_mps = { uniform = [0.8, 1.3] }      # uniform in [lo, hi]

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from bigcbf.params.perception import X3_LASER_MOUNT, PerceptionParams
+from bigcbf.robots import robot
 from bigcbf.sim.lidar import LidarConfig
 from bigcbf.sim.scene import Cylinder, PedestrianBody, SceneSpec, Wall
 from bigcbf.sim.world import SimWorld
@@ -11,12 +12,14 @@ LASER_X = X3_LASER_MOUNT[0]     # the laser sits 4.35 cm ahead of base_link
 
 
 def test_one_laser_mount_for_model_and_perception():
-    """The MJCF's lidar site (generated from X3_LASER_MOUNT) and the perception's default mounting agree."""
+    """The X3 MJCF's lidar site (the robot's mount, bigcbf/robots.py) and the perception's default mounting
+    (X3_LASER_MOUNT) agree."""
     x, y, _, yaw = SimWorld(SceneSpec()).sensor_frames()["laser"]
     assert (x, y, yaw) == pytest.approx(X3_LASER_MOUNT, abs=1e-9)
     p = PerceptionParams()
     assert (p.laser_x_m, p.laser_y_m, p.laser_yaw_rad) == X3_LASER_MOUNT
     assert X3_LASER_MOUNT == (0.0435, 0.0, 0.0)        # URDF laser_joint (assets/rosmaster_x3/README.md)
+    assert robot("rosmaster_x3").laser_mount == pytest.approx((*X3_LASER_MOUNT[:2], 0.192, 0.0), abs=1e-9)
 
 
 def _beam(scan, angle):

@@ -13,9 +13,10 @@ from dataclasses import dataclass, fields
 from .checks import check_field_ranges, ranged
 
 #: The laser frame's pose in base_link on the Rosmaster X3 model: x [m], y [m], yaw [rad] (URDF ``laser_joint``;
-#: bigcbf/assets/rosmaster_x3/README.md). The one definition: the MJCF's ``lidar`` site is generated from it
-#: (assets/rosmaster_x3/generate.py, which adds the height), the perception's default mounting below and the
-#: synthetic scans (perception/synthetic.py) use it.
+#: bigcbf/assets/rosmaster_x3/README.md). The robot's MJCF ``lidar`` site is the source (bigcbf/robots.py reads
+#: every robot's mount from its model; tests/test_lidar.py checks the X3's equals this); the perception's default
+#: mounting below and the synthetic scans (perception/synthetic.py) use it, and an episode replaces this default by
+#: its robot's mount (``Robot.perception_params``).
 X3_LASER_MOUNT = (0.0435, 0.0, 0.0)
 
 

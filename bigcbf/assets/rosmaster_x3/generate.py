@@ -200,7 +200,8 @@ def robot_xml(b: MecanumBase) -> str:
             rgba="0.2 0.2 0.25 1"/>
       <site name="imu" pos="{f(*b.imu_pos)}" size="0.01" group="3"/>
       <site name="lidar" pos="{f(*lp)}" size="0.01" group="3"/>
-      <site name="footprint" type="cylinder" size="{f(b.footprint_radius)} 0.001" pos="0 0 {-R + 0.002:.4f}" rgba="1 1 1 0.15"
+      <site name="footprint" type="cylinder" size="{f(b.footprint_radius)} 0.001" pos="0 0 {-R + 0.002:.4f}" \
+rgba="1 1 1 0.15"
             group="3"/>
 {body}
     </body>
