@@ -26,12 +26,17 @@ def add_arguments(p):
 def _list_families() -> None:
     from ..worlds import FAMILIES, SPLITS
 
+    def seeds(splits: dict[str, range]) -> str:
+        return " and ".join(f"{r.start}-{r.stop - 1} ({split})" for split, r in splits.items())
+
     for fam in FAMILIES.values():
         print(f"{fam.name}: {fam.summary}")
         for r in fam.ranges:
             print(f"    {r}")
+        if fam.splits != SPLITS:
+            print(f"    generated suite: seeds {seeds(fam.splits)}")
     print("The generated bench suite ('bigcbf bench --suite generated') holds, per family, the worlds of seeds "
-          + " and ".join(f"{r.start}-{r.stop - 1} ({split})" for split, r in SPLITS.items()) + ".")
+          + seeds(SPLITS) + (" unless listed above." if any(f.splits != SPLITS for f in FAMILIES.values()) else "."))
 
 
 def _generate(args) -> int:
