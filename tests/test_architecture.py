@@ -41,8 +41,6 @@ MUJOCO = ("mujoco", "dm_control")
 
 #: rule 4 as the code stands (reported, not weakened): module -> why it imports MuJoCo itself
 KNOWN_MUJOCO_OUTSIDE_SIM = {
-    "twin.replay": "write_video imports mujoco (and cv2) itself to render the replay's top view instead of going "
-                   "through bigcbf.sim.render alone",
 }
 
 

@@ -646,27 +646,23 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
     model (orange) the path so far and the robot's current pose (its footprint and heading), the whole logged path
     thin, a scale bar in metres, the time, and a legend band below naming each colour. The paths are drawn on the
     image (the top camera is orthographic: a metre is H / fovy pixels)."""
-    import mujoco
-
-    from bigcbf.sim.render import Renderer, VideoWriter, put_text, with_legend_strip
+    from bigcbf.sim.render import Renderer, VideoWriter, meters_per_pixel, project, put_text, with_legend_strip
 
     W, H = 640, 480
     state: dict = {}
     legend = legend_items(run.name)
     t_total = float(data.odom.t[-1] - data.cmd.t[0])
 
-    def to_px(xy, cam, scale):
+    def to_px(world, xy):
         xy = np.asarray(xy, float).reshape(-1, 2)
-        return np.column_stack([W / 2 + (xy[:, 0] - cam[0]) * scale, H / 2 - (xy[:, 1] - cam[1]) * scale]
-                               ).round().astype(np.int32)
+        uv, _ = project(world.model, world.data, "top", np.column_stack([xy, np.zeros(len(xy))]), W, H)
+        return uv.round().astype(np.int32)
 
     def frame(world, t_log):
         if "r" not in state:
             state["r"] = Renderer(world.model, W, H)
-            cid = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_CAMERA, "top")
-            state["cam"] = world.data.cam_xpos[cid].copy()
-            state["scale"] = H / float(world.model.cam_fovy[cid])
-        cam, scale = state["cam"], state["scale"]
+            state["scale"] = 1.0 / meters_per_pixel(world.model, "top", H)     # the top camera is orthographic
+        scale = state["scale"]
         img = np.ascontiguousarray(state["r"].render(world.data, "top"))
         k = int(np.searchsorted(run.t, t_log, side="right"))
         lk = int(np.searchsorted(data.odom.t, t_log, side="right"))
@@ -675,7 +671,7 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
         start = data.odom.pose[k0:k0 + 1]            # both models start at the logged pose at the first command
         paths = [("logged", logged), ("nominal", nominal.pose[:k] if k else start),
                  ("model", run.pose[:k] if k else start)]
-        overlay(img, lambda xy: to_px(xy, cam, scale), scale, paths, route=data.odom.pose)
+        overlay(img, lambda xy: to_px(world, xy), scale, paths, route=data.odom.pose)
         tw = data.odom.twist[min(max(lk - 1, 0), len(data.odom.t) - 1)]
         put_text(img, [f"t = {t_log - data.cmd.t[0]:6.2f} s of {t_total:.1f} s   replay of {Path(data.path).name}",
                        f"logged twist ({tw[0]:+.2f} m/s, {tw[1]:+.2f} m/s, {tw[2]:+.2f} rad/s)"], scale=0.5)
