@@ -386,6 +386,21 @@ def model_profile(A, d, delay_s: float, A0, d0, delay0_s: float, v_max: float | 
                         else None)
 
 
+def _invertible_gain(A0, min_gain: float = 0.05) -> tuple[np.ndarray, list[str]]:
+    """The model's own gain matrix A0 with each axis whose own gain is below ``min_gain`` (an axis the log barely
+    drives: its fit is 0 or noise, and A0 cannot be inverted) replaced by the ideal response on that axis; the
+    names of the replaced axes."""
+    A0 = np.array(A0, float)
+    weak = [j for j in range(3) if not np.isfinite(A0[j, j]) or abs(A0[j, j]) < min_gain]
+    for j in weak:
+        A0[j, :] = 0.0
+        A0[:, j] = 0.0
+        A0[j, j] = 1.0
+    if not np.all(np.isfinite(A0)) or np.linalg.cond(A0) > 1e8:      # still degenerate: the ideal model
+        return np.eye(3), ["vx", "vy", "wz"]
+    return A0, [("vx", "vy", "wz")[j] for j in weak]
+
+
 def _median_latency(cal) -> float:
     lat = cal.latency_s[cal.fit.identified]
     lat = lat[np.isfinite(lat)]
@@ -497,6 +512,10 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
                      + " from the given profile; dead time measured on this log")
     if cal0 is not None:
         A0, d0, L0, own_accel = cal0.fit.A, cal0.fit.d, _median_latency(cal0), cal0.model.dynamic.accel_max
+        A0, weak = _invertible_gain(A0)
+        if weak:
+            notes.append("the nominal replay's own gain could not be measured on " + ", ".join(weak) + " (too little "
+                         "motion on that axis in this log): taken as ideal (1) there")
     else:
         A0, d0, L0, own_accel = np.eye(3), np.zeros(3), 0.0, None
     prof = model_profile(A, d, delay_s, A0, d0, L0, v_max, lever, accel, own_accel)
