@@ -292,7 +292,7 @@ NEVER_MOVED = 0.05          # the odometry's path below this fraction of the com
 
 def _check_moved(cmd, odom, path: str) -> None:
     """A UserError when the odometry shows (next to) no motion while the commands ask for some: the path length
-    and the summed heading change under ``NEVER_MOVED`` of the commanded ones (||u_xy|| and |wz| held over the
+    and the summed heading change (of the pose, or of the twist integrated, whichever is larger) under ``NEVER_MOVED`` of the commanded ones (||u_xy|| and |wz| held over the
     odometry's span), each where the commands ask for at least 0.2 m or 0.2 rad."""
     t = odom.t[odom.t >= cmd.t[0]]
     if len(t) < 2:
@@ -302,8 +302,9 @@ def _check_moved(cmd, odom, path: str) -> None:
     want_xy = float(np.sum(np.hypot(u[:, 0], u[:, 1]) * dt))
     want_yaw = float(np.sum(np.abs(u[:, 2]) * dt))
     pose = odom.pose[odom.t >= cmd.t[0]]
-    got_xy = float(np.sum(np.hypot(*np.diff(pose[:, :2], axis=0).T)))
-    got_yaw = float(np.sum(np.abs(np.diff(np.unwrap(pose[:, 2])))))
+    v = odom.twist[odom.t >= cmd.t[0]][:-1]            # a log may carry only one of pose and twist: either moving
+    got_xy = max(float(np.sum(np.hypot(*np.diff(pose[:, :2], axis=0).T))), float(np.sum(np.hypot(v[:, 0], v[:, 1]) * dt)))
+    got_yaw = max(float(np.sum(np.abs(np.diff(np.unwrap(pose[:, 2]))))), float(np.sum(np.abs(v[:, 2]) * dt)))
     asked = [(g, w) for g, w in ((got_xy, want_xy), (got_yaw, want_yaw)) if w >= 0.2]
     if asked and all(g < NEVER_MOVED * w for g, w in asked):
         raise UserError(f"the robot never moved: the commands on {cmd.topic} ask for {want_xy:.2f} m and "
