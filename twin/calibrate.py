@@ -303,13 +303,14 @@ def _check_moved(cmd, odom, path: str) -> None:
     want_yaw = float(np.sum(np.abs(u[:, 2]) * dt))
     pose = odom.pose[odom.t >= cmd.t[0]]
     v = odom.twist[odom.t >= cmd.t[0]][:-1]            # a log may carry only one of pose and twist: either moving
-    got_xy = max(float(np.sum(np.hypot(*np.diff(pose[:, :2], axis=0).T))), float(np.sum(np.hypot(v[:, 0], v[:, 1]) * dt)))
+    got_xy = max(float(np.sum(np.hypot(*np.diff(pose[:, :2], axis=0).T))),
+                 float(np.sum(np.hypot(v[:, 0], v[:, 1]) * dt)))
     got_yaw = max(float(np.sum(np.abs(np.diff(np.unwrap(pose[:, 2]))))), float(np.sum(np.abs(v[:, 2]) * dt)))
     asked = [(g, w) for g, w in ((got_xy, want_xy), (got_yaw, want_yaw)) if w >= 0.2]
     if asked and all(g < NEVER_MOVED * w for g, w in asked):
         raise UserError(f"the robot never moved: the commands on {cmd.topic} ask for {want_xy:.2f} m and "
-                        f"{want_yaw:.2f} rad, the odometry ({odom.topic}) shows {got_xy:.3f} m and {got_yaw:.3f} rad; "
-                        "nothing to calibrate", file=path)
+                        f"{want_yaw:.2f} rad, the odometry ({odom.topic}) shows {got_xy:.3f} m and {got_yaw:.3f} "
+                        "rad; nothing to calibrate", file=path)
 
 
 def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions()) -> Calibration:
@@ -358,7 +359,8 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
     held = holdout_mask(t, opt.residual)
     settled0 = settled_samples(cmd.t, cmd.u, t - delay.xcorr_s, opt.execution)
     if not (settled0 & ~held).any():
-        raise UserError("no odometry sample in the calibration blocks follows a held command long enough to settle: "
+        raise UserError("no odometry sample in the calibration blocks follows a held command long enough to "
+                        "settle: "
                         f"the commands on {cmd.topic} change faster than the robot can follow (or their order is "
                         "scrambled)", file=path)
     nb = max(6, int(round((t[-1] - t[0]) / opt.block_s)))
