@@ -67,7 +67,7 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     for another seed is recorded as that episode's error row when it runs (and the bench exits with status 1).
     """
     from ..config import RunConfig
-    from ..control.methods import resolve_method
+    from ..control.methods import make_planner, resolve_method
     from ..episode import PERCEPTION_MODES
     from ..scenario import base_profile_text, load_scenario, resolve_path
 
@@ -89,9 +89,14 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
         raise UserError(f"unknown engine {config.engine!r}; known: {', '.join(engines.ENGINES)}")
     if config.perception not in PERCEPTION_MODES:
         raise UserError(f"unknown perception {config.perception!r}; known: {', '.join(PERCEPTION_MODES)}")
-    for m in config.methods:
-        resolve_method(m)
-    ptoml = params_toml(config.config if config.config is not None else RunConfig())
+    run_config = config.config if config.config is not None else RunConfig()
+    if isinstance(run_config, RunConfig):
+        for m in config.methods:         # as `bigcbf run` does: a factory that gives no planner is refused now,
+            make_planner(m, run_config.stack, run_config.method_params(m))   # not in every worker's episode
+    else:
+        for m in config.methods:
+            resolve_method(m)
+    ptoml = params_toml(run_config)
     phash = params_key(ptoml, config.perception)
 
     scen: dict[str, tuple[str, str, str]] = {}     # name -> (key, text, base robot profile's text)
