@@ -52,11 +52,15 @@ Choices the paper leaves open (documented here, parameters in StackParams):
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from . import kernels
+from .jit import kernel
 
 BEHAVIORS: tuple[str, ...] = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD")
 REVERSE = "REVERSE"
@@ -75,6 +79,11 @@ GAIN_NEAR_PER_S = 2.0          # eq:behavior_feedback (2 1/s) ||e_b||
 GAIN_LIN_PER_S = 0.35          # eq:behavior_feedback (0.35 1/s) e_b
 _TINY = 1e-12
 RELEASE_MOVING_MPS = 0.2       # obstacles faster than this are released from sideways (see REVERSE above)
+# what the compiled policy does per mode index: GOAL heads for p_g, PASS uses the relevant obstacle, FIXED (SIDE,
+# YIELD) a fixed subgoal in the goal basis, REVERSE the fallback's velocity
+GOAL_KIND, PASS_KIND, FIXED_KIND, REVERSE_KIND = 0, 1, 2, 3
+KIND = np.array([GOAL_KIND, PASS_KIND, PASS_KIND, FIXED_KIND, FIXED_KIND, FIXED_KIND, REVERSE_KIND])
+LATERAL_M = np.where(IS_SIDE, SIDE_LATERAL_M * SIGMA, 0.0)     # SIDE's lateral offset along n_g [m], 0 otherwise
 
 
 def speed_limits(params: StackParams) -> np.ndarray:
@@ -120,89 +129,192 @@ def alone_in_group(groups) -> np.ndarray:
     return np.bincount(groups)[groups] == 1 if len(groups) else np.zeros(0, bool)
 
 
-def group_extent(sigma, j, c, obs_r, groups) -> np.ndarray:
-    """max_{m in G(j_b)} (sigma_b c_{b,m} + r_m) per row b: how far the relevant obstacle's group reaches
-    towards side sigma_b, measured from the robot across the goal line. c (B, M); j (B,), -1 for none (0)."""
-    if c.shape[1] == 0:
-        return np.zeros(len(j))
-    same = groups[np.maximum(j, 0)][:, None] == groups[None, :]
-    ext = np.max(np.where(same, np.asarray(sigma, float)[:, None] * c + np.asarray(obs_r, float)[None, :],
-                          -np.inf), axis=1)
-    return np.where(j >= 0, ext, 0.0)
+# ------------------------------------------------------------------------------------------------------------------
+# The policies pi_b, compiled (numba, jit.kernel): one implementation. The execution loop (behavior_command, every
+# control tick) and the imagination's rollout (imagination._rollout, every imagined step, all candidates at once)
+# both evaluate them through PolicyData.velocity, i.e. _policy_rows; subgoal_error, relevant_obstacle and
+# feedback_velocity run the same kernels, one term each. The arithmetic keeps the order of the numpy formulation
+# of the execution path it replaced (d_g = e / ||e||, s_i - r_i < range, max(0.85, s_i), the saturation of
+# eq:behavior_feedback (11) as a magnitude): the commands executed are the bits they were (checked on 3000 random
+# scenes when it was introduced, issue 22), while the rollout, which had its own algebraically rearranged copy,
+# now imagines exactly the command the robot gets (tests/control/test_control_policy.py).
+
+_outside_goal_region = kernel(kernels.outside_goal_region)      # eq:goal_region (5), compiled once more
 
 
-def relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params: StackParams, *, with_offsets: bool = False):
-    """The locally relevant obstacle of eq:behavior_subgoals for each row (see the module docstring).
+@kernel
+def _basis(px, py, goal):
+    """eq:goal_basis (9) for a robot at (px, py): e = p_g - p, ||e||, d_g = e / ||e|| (0 at the goal itself);
+    n_g = (-d_g,y, d_g,x)."""
+    ex, ey = goal.real - px, goal.imag - py
+    dist = math.hypot(ex, ey)
+    return ex, ey, dist, ex / max(dist, _TINY), ey / max(dist, _TINY)
 
-    p, d_g, n_g (B, 2); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none, c_i (B,), r_i (B,)),
-    c_i and r_i being 0 where there is none; with ``with_offsets`` also the cross-track offsets c (B, M) and the
-    relevant obstacle's along-track distance s_i (B,) (0 where there is none).
-    """
+
+@kernel
+def _track(z, px, py, dx, dy):
+    """An obstacle at z seen from (px, py) in the goal basis: along-track s = (p_i - p).d_g and cross-track
+    c = (p_i - p).n_g."""
+    rx, ry = z.real - px, z.imag - py
+    return rx * dx + ry * dy, rx * -dy + ry * dx
+
+
+@kernel
+def _relevant(px, py, dx, dy, obs_z, obs_r, geo):
+    """eq:behavior_subgoals (10): the locally relevant obstacle (module docstring): its index (-1 for none), s_i and
+    c_i (0 for none). The nearest in s_i wins, ties to the lower index. geo: see :class:`PolicyData`."""
+    r_robot, d0, reach, band = geo[0], geo[1], geo[2], geo[3]
+    j, s_j, c_j = -1, np.inf, 0.0
+    for m in range(obs_r.shape[0]):
+        s, c = _track(obs_z[m], px, py, dx, dy)
+        r = obs_r[m]
+        if s > -(r_robot + r) and s - r < reach and abs(c) < r_robot + r + d0 + band and s < s_j:
+            j, s_j, c_j = m, s, c
+    return j, (s_j if j >= 0 else 0.0), c_j
+
+
+@kernel
+def _pass_offset(sigma, px, py, dx, dy, j, obs_z, obs_r, groups, geo):
+    """eq:behavior_subgoals (10) lateral PASS offset max(d_pass, r_R + r_j + 0.35) [m] around relevant obstacle j,
+    d_pass = max(d_pass_min, extent + r_R + 0.35), the extent being how far j's group reaches towards side sigma,
+    max over m in G(j) of sigma c_m + r_m (module docstring)."""
+    extent = -np.inf
+    for m in range(obs_r.shape[0]):
+        if groups[m] == groups[j]:
+            extent = max(extent, sigma * _track(obs_z[m], px, py, dx, dy)[1] + obs_r[m])
+    r_robot = geo[0]
+    return max(max(geo[4], extent + r_robot + PASS_EXTRA_M), r_robot + obs_r[j] + PASS_EXTRA_M)
+
+
+@kernel
+def _subgoal(kind, forward, lateral, sigma, px, py, ex, ey, dx, dy, obs_z, obs_r, groups, alone, geo):
+    """eq:behavior_subgoals (10): e_b = g_b - p of one row (:func:`subgoal_error`); e = p_g - p and d_g from
+    :func:`_basis`."""
+    if kind == GOAL_KIND:
+        return ex, ey
+    if kind == PASS_KIND:
+        j, s_j, _ = _relevant(px, py, dx, dy, obs_z, obs_r, geo)
+        offset = 0.0
+        if j >= 0:
+            offset = _pass_offset(sigma, px, py, dx, dy, j, obs_z, obs_r, groups, geo)
+            if alone[j]:                 # beside a lone obstacle: forward max(0.85, s_i)
+                forward = max(forward, s_j)
+        lateral = sigma * offset
+    return forward * dx + lateral * -dy, forward * dy + lateral * dx
+
+
+@kernel
+def _feedback(ex, ey, v_max):
+    """eq:behavior_feedback (11) for one row: both terms are parallel to e, so v = e/||e|| min(v_max, min(v_max,
+    2||e||) + 0.35||e||)."""
+    n = math.hypot(ex, ey)
+    k = min(min(v_max, GAIN_NEAR_PER_S * n) + GAIN_LIN_PER_S * n, v_max) / max(n, _TINY)
+    return ex * k, ey * k
+
+
+@kernel
+def _policy_rows(kind, coef, pz, goal, obs_z, obs_r, groups, alone, release, geo, out):
+    """pi_b of every row b into ``out`` (B,) complex world velocities [m/s]: zero inside the goal region
+    (eq:goal_region (5)), ``release[b]`` for a REVERSE row, else eq:behavior_feedback (11) towards the subgoal of
+    eq:behavior_subgoals (10). coef (4, B): forward, SIDE lateral, sigma, v_b^max (:func:`mode_rows`)."""
+    for b in range(pz.shape[0]):
+        px, py = pz[b].real, pz[b].imag
+        ex, ey, dist, dx, dy = _basis(px, py, goal)
+        if not _outside_goal_region(dist, geo[5]):
+            out[b] = 0j
+        elif kind[b] == REVERSE_KIND:
+            out[b] = release[b]
+        else:
+            sx, sy = _subgoal(kind[b], coef[0, b], coef[1, b], coef[2, b], px, py, ex, ey, dx, dy, obs_z, obs_r,
+                              groups, alone, geo)
+            vx, vy = _feedback(sx, sy, coef[3, b])
+            out[b] = complex(vx, vy)
+
+
+@kernel
+def _subgoal_rows(kind, coef, pz, goal, obs_z, obs_r, groups, alone, geo, out):
+    """:func:`_subgoal` of every row into ``out`` (B, 2)."""
+    for b in range(pz.shape[0]):
+        px, py = pz[b].real, pz[b].imag
+        ex, ey, _, dx, dy = _basis(px, py, goal)
+        out[b] = _subgoal(kind[b], coef[0, b], coef[1, b], coef[2, b], px, py, ex, ey, dx, dy, obs_z, obs_r,
+                          groups, alone, geo)
+
+
+@kernel
+def _relevant_rows(pz, dz, obs_z, obs_r, geo, out_j, out_c):
+    """:func:`_relevant` of every row (robot pz[b], direction d_g = dz[b]) into out_j, out_c."""
+    for b in range(pz.shape[0]):
+        out_j[b], _, out_c[b] = _relevant(pz[b].real, pz[b].imag, dz[b].real, dz[b].imag, obs_z, obs_r, geo)
+
+
+@kernel
+def _feedback_rows(e, v_max, out):
+    """:func:`_feedback` of every row of e (B, 2) into ``out`` (B, 2)."""
+    for b in range(e.shape[0]):
+        out[b] = _feedback(e[b, 0], e[b, 1], v_max[b])
+
+
+def _planar(a) -> np.ndarray:
+    """Real 2-vectors (..., 2) as complex numbers x + i y (exact)."""
+    a = np.asarray(a, float)
+    return a[..., 0] + 1j * a[..., 1]
+
+
+def mode_rows(mode_idx, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
+    """The per-row constants of the compiled policy for mode indices (B,): kind (B,) and coef (4, B) = the
+    eq:behavior_subgoals (10) forward [m] and SIDE lateral [m] offsets, sigma, v_b^max of eq:behavior_feedback (11)
+    [m/s]."""
+    mode_idx = np.asarray(mode_idx, int).reshape(-1)
+    coef = np.stack([FORWARD_M[mode_idx], LATERAL_M[mode_idx], SIGMA[mode_idx], speed_limits(params)[mode_idx]])
+    return KIND[mode_idx], np.ascontiguousarray(coef)
+
+
+def policy_geometry(params: StackParams) -> np.ndarray:
+    """The geometry the compiled policy reads (6,): r_R, d0, relevant_range_m, in_way_margin_m, d_pass_min_m,
+    eps_g_m [m]."""
+    unc = params.uncertainty
+    return np.array([unc.r_robot_m, unc.d0_m, params.relevant_range_m, params.in_way_margin_m,
+                     params.d_pass_min_m, params.eps_g_m])
+
+
+def relevant_obstacle(p, d_g, obs_p, obs_r, params: StackParams):
+    """The locally relevant obstacle of eq:behavior_subgoals (10) for each row (see the module docstring).
+
+    p, d_g (B, 2) (d_g from :func:`goal_basis`); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none,
+    c_i (B,), r_i (B,)), c_i = (p_i - p).n_g and r_i being 0 where there is none."""
     p = np.atleast_2d(np.asarray(p, float))
-    B, M = len(p), len(obs_r)
-    if M == 0:
-        out = (np.full(B, -1), np.zeros(B), np.zeros(B))
-        return out + (np.zeros((B, 0)), np.zeros(B)) if with_offsets else out
-    unc = params.uncertainty
-    rel = np.asarray(obs_p, float)[None, :, :] - p[:, None, :]
-    s = rel[..., 0] * d_g[:, None, 0] + rel[..., 1] * d_g[:, None, 1]
-    c = rel[..., 0] * n_g[:, None, 0] + rel[..., 1] * n_g[:, None, 1]
-    r = np.asarray(obs_r, float)[None, :]
-    relevant = ((s > -(unc.r_robot_m + r)) & (s - r < params.relevant_range_m)
-                & (np.abs(c) < unc.r_robot_m + r + unc.d0_m + params.in_way_margin_m))
-    key = np.where(relevant, s, np.inf)
-    j = np.argmin(key, axis=1)
-    rows = np.arange(B)
-    has = np.isfinite(key[rows, j])
-    out = np.where(has, j, -1), np.where(has, c[rows, j], 0.0), np.where(has, r[0, j], 0.0)
-    return out + (c, np.where(has, s[rows, j], 0.0)) if with_offsets else out
-
-
-def pass_offset(extent, r_rel, has_rel, params: StackParams) -> np.ndarray:
-    """eq:behavior_subgoals lateral PASS offset max(d_pass, r_R + r_i + 0.35) [m], with d_pass = max(d_pass_min,
-    extent + r_R + 0.35), ``extent`` being the group's reach towards the side (:func:`group_extent`; for a lone
-    obstacle sigma c_i + r_i); 0 without a relevant obstacle."""
-    unc = params.uncertainty
-    d_pass = np.maximum(params.d_pass_min_m, extent + unc.r_robot_m + PASS_EXTRA_M)
-    return np.where(has_rel, np.maximum(d_pass, unc.r_robot_m + r_rel + PASS_EXTRA_M), 0.0)
+    obs_r = np.asarray(obs_r, float).reshape(-1)
+    j, c = np.empty(len(p), np.int64), np.empty(len(p))
+    _relevant_rows(_planar(p), _planar(np.atleast_2d(d_g)), _planar(np.reshape(obs_p, (-1, 2))), obs_r,
+                   policy_geometry(params), j, c)
+    return j, c, np.where(j >= 0, obs_r[np.maximum(j, 0)] if len(obs_r) else 0.0, 0.0)
 
 
 def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
-    """eq:behavior_subgoals: e_b = g_b - p (B, 2) for each row's mode:
+    """eq:behavior_subgoals (10): e_b = g_b - p (B, 2) for each row's mode:
     GOAL p_g - p; PASS-sigma max(0.85, s_i) d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a
     relevant obstacle or when it is part of a group; s_i its along-track distance, see the module docstring);
     SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
     YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
     ``groups``: labels from :func:`obstacle_groups` (computed here when not given)."""
-    mode_idx = np.asarray(mode_idx, int)
     p = np.atleast_2d(np.asarray(p, float))
-    d_g, n_g, _ = goal_basis(p, goal)
-    sigma = SIGMA[mode_idx]
-    lateral = np.where(IS_SIDE[mode_idx], SIDE_LATERAL_M * sigma, 0.0)
-    forward = FORWARD_M[mode_idx]
-    if np.any(IS_PASS[mode_idx]):
-        j, c_rel, r_rel, c, s_rel = relevant_obstacle(p, d_g, n_g, obs_p, obs_r, params, with_offsets=True)
-        if groups is None:
-            groups = obstacle_groups(obs_p, obs_r, params)
-        ext = group_extent(sigma, j, c, obs_r, groups)
-        lateral = np.where(IS_PASS[mode_idx], sigma * pass_offset(ext, r_rel, j >= 0, params), lateral)
-        alone = alone_in_group(groups)
-        lone_rel = (j >= 0) & alone[np.maximum(j, 0)] if len(alone) else np.zeros(len(j), bool)
-        forward = np.where(IS_PASS[mode_idx] & lone_rel, np.maximum(forward, s_rel), forward)
-    e = forward[:, None] * d_g + lateral[:, None] * n_g
-    return np.where(IS_GOAL[mode_idx, None], np.asarray(goal, float) - p, e)
+    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups)
+    out = np.empty((len(p), 2))
+    _subgoal_rows(data.kind, data.coef, _planar(p), data.goal, _planar(np.reshape(obs_p, (-1, 2))), data.obs_r,
+                  data.groups, data.alone, data.geometry, out)
+    return out
 
 
 def feedback_velocity(e, v_max) -> np.ndarray:
-    """eq:behavior_feedback: v_b = sat_{v_max}[ e/||e|| min(v_max, 2||e||) + 0.35 e ] (world frame, m/s).
+    """eq:behavior_feedback (11): v_b = sat_{v_max}[ e/||e|| min(v_max, 2||e||) + 0.35 e ] (world frame, m/s).
 
     Both terms are parallel to e, so v_b = e/||e|| min(v_max, min(v_max, 2||e||) + 0.35||e||). e (B, 2), v_max (B,).
     """
-    e = np.atleast_2d(np.asarray(e, float))
-    n = np.hypot(e[:, 0], e[:, 1])
-    v_max = np.asarray(v_max, float)
-    mag = np.minimum(np.minimum(v_max, GAIN_NEAR_PER_S * n) + GAIN_LIN_PER_S * n, v_max)
-    return e * (mag / np.maximum(n, _TINY))[:, None]
+    e = np.ascontiguousarray(np.atleast_2d(np.asarray(e, float)))
+    out = np.empty_like(e)
+    _feedback_rows(e, np.ascontiguousarray(np.broadcast_to(np.asarray(v_max, float), len(e))), out)
+    return out
 
 
 def release_directions_c(qz: np.ndarray, obs_vz: np.ndarray | None) -> np.ndarray:
@@ -227,44 +339,98 @@ def release_directions(q, obs_v) -> np.ndarray:
     return np.stack([d.real, d.imag], -1)
 
 
-def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> np.ndarray:
-    """The reverse-release fallback's push velocity (B, 2) [m/s] (see the module docstring)."""
-    p = np.atleast_2d(np.asarray(p, float))
+def release_velocity_c(pz, goal: complex, obs_z, obs_r, params: StackParams, obs_vz=None) -> np.ndarray:
+    """The reverse-release fallback's push velocity (module docstring) on complex planar vectors: robot positions
+    pz (B,), goal p_g, obstacle positions obs_z (M,), radii (M,), velocities obs_vz (M,) or None -> (B,) [m/s]."""
     unc = params.uncertainty
-    pz = p[:, 0] + 1j * p[:, 1]
-    g = complex(*np.asarray(goal, float).reshape(2)) - pz
+    g = goal - pz
     back = -g / np.maximum(np.abs(g), _TINY)                       # -d_g (0 at the goal itself)
     direction = back
     if len(obs_r):
-        op = np.asarray(obs_p, float)
-        qz = pz[:, None] - (op[:, 0] + 1j * op[:, 1])[None]
+        qz = pz[:, None] - obs_z[None]
         w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m
                        - np.abs(qz), 0.0)
         if w.any():                     # (usually nothing is that close: skip the directions)
-            vz = None if obs_v is None else np.asarray(obs_v, float) @ np.array([1.0, 1j])
-            push = (w * release_directions_c(qz, vz)).sum(axis=1)
+            push = (w * release_directions_c(qz, obs_vz)).sum(axis=1)
             npush = np.abs(push)
             direction = np.where(npush > 1e-9, push / np.maximum(npush, _TINY), back)
-    v = params.v_release_mps * direction
+    return params.v_release_mps * direction
+
+
+def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> np.ndarray:
+    """The reverse-release fallback's push velocity (B, 2) [m/s] (see the module docstring): positions p (B, 2),
+    obstacles obs_p (M, 2), obs_r (M,), obs_v (M, 2) or None."""
+    v = release_velocity_c(_planar(np.atleast_2d(p)), complex(*np.asarray(goal, float).reshape(2)),
+                           _planar(np.reshape(obs_p, (-1, 2))), obs_r, params,
+                           None if obs_v is None else _planar(obs_v))
     return np.stack([v.real, v.imag], -1)
+
+
+@dataclass(frozen=True)
+class PolicyData:
+    """What an evaluation of the behavior policies pi_b needs besides where the robot and the obstacles are at that
+    moment (the pattern of Nav2 MPPI's ``CriticData``: one bundle, built once, handed to every evaluation).
+
+    The execution loop builds one per control tick (one row, the latest obstacles: eq:online_behavior_command (8));
+    the imagination one per rollout (a row per candidate, the obstacle groups from the obstacles at k = 0) and
+    evaluates it at every imagined step with the predicted obstacles O^k (eq:behavior_rollout (12)).
+    """
+
+    kind: np.ndarray                 # (B,) GOAL_KIND, PASS_KIND, FIXED_KIND or REVERSE_KIND (:func:`mode_rows`)
+    coef: np.ndarray                 # (4, B) forward [m], SIDE lateral [m], sigma, v_b^max [m/s]
+    goal: complex                    # p_g
+    obs_r: np.ndarray                # (M,) radii [m]
+    groups: np.ndarray               # (M,) int64 labels of :func:`obstacle_groups` (PASS reads them)
+    alone: np.ndarray                # (M,) bool, :func:`alone_in_group`
+    obs_vz: np.ndarray | None        # (M,) complex velocities [m/s] (the push), or None
+    release: np.ndarray              # (B,) complex chosen REVERSE velocities [m/s] (0 where none or ``push``)
+    push: bool                       # REVERSE rows without a chosen velocity: the push, at each evaluation
+    geometry: np.ndarray             # (6,) :func:`policy_geometry`
+    params: StackParams
+
+    @classmethod
+    def build(cls, mode_idx, goal, obs_p, obs_r, params: StackParams, *, groups=None, obs_v=None,
+              release=None, rows=None) -> "PolicyData":
+        """``mode_idx`` (B,); obstacles at the start obs_p (M, 2), obs_r (M,), obs_v (M, 2) or None; ``groups``
+        (computed from obs_p when a PASS row needs them); ``release``: a complex REVERSE velocity, one for all rows
+        or one per row (None: the push); ``rows``: :func:`mode_rows` of ``mode_idx`` when already at hand."""
+        kind, coef = mode_rows(mode_idx, params) if rows is None else rows
+        obs_r = np.ascontiguousarray(obs_r, dtype=float).reshape(-1)
+        if groups is None:
+            groups = (obstacle_groups(obs_p, obs_r, params) if len(obs_r) and np.any(kind == PASS_KIND)
+                      else np.zeros(len(obs_r), int))
+        groups = np.ascontiguousarray(groups, dtype=np.int64)
+        push = release is None and bool(np.any(kind == REVERSE_KIND))
+        release = np.ascontiguousarray(np.broadcast_to(np.asarray(0j if release is None else release, complex),
+                                                        kind.shape))
+        return cls(kind, coef, complex(*np.asarray(goal, float).reshape(2)), obs_r, groups, alone_in_group(groups),
+                   None if obs_v is None else _planar(obs_v), release, push, policy_geometry(params), params)
+
+    def velocity(self, pz, obs_z) -> np.ndarray:
+        """pi_b of every row as world-frame velocities (B,) complex [m/s] (eq:goal_basis (9), eq:behavior_subgoals
+        (10), eq:behavior_feedback (11), zero inside eq:goal_region (5)) for robot positions pz (B,) complex and
+        obstacle positions obs_z (M,) complex. REVERSE rows: ``release``, or the push from pz and obs_z."""
+        pz = np.ascontiguousarray(pz, dtype=complex)
+        obs_z = np.ascontiguousarray(obs_z, dtype=complex)
+        release = (release_velocity_c(pz, self.goal, obs_z, self.obs_r, self.params, self.obs_vz) if self.push
+                   else self.release)
+        out = np.empty(len(pz), complex)
+        _policy_rows(self.kind, self.coef, pz, self.goal, obs_z, self.obs_r, self.groups, self.alone, release,
+                     self.geometry, out)
+        return out
 
 
 def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None,
                     release_v=None) -> np.ndarray:
-    """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (eq:goal_basis,
-    eq:behavior_subgoals, eq:behavior_feedback), zero inside the
-    goal region; REVERSE rows use the fallback: ``release_v`` (2,) when given, else the push."""
-    mode_idx = np.asarray(mode_idx, int)
+    """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (eq:goal_basis (9),
+    eq:behavior_subgoals (10), eq:behavior_feedback (11)), zero inside the goal region; REVERSE rows use the
+    fallback: ``release_v`` (2,) when given, else the push. (:meth:`PolicyData.velocity` on real arrays.)"""
     p = np.atleast_2d(np.asarray(p, float))
-    v = feedback_velocity(subgoal_error(mode_idx, p, goal, obs_p, obs_r, params, groups),
-                          speed_limits(params)[mode_idx])
-    is_rev = mode_idx == MODE_INDEX[REVERSE]
-    if np.any(is_rev):
-        rv = (release_velocity(p, goal, obs_p, obs_r, params, obs_v) if release_v is None
-              else np.broadcast_to(np.asarray(release_v, float).reshape(2), p.shape))
-        v = np.where(is_rev[:, None], rv, v)
-    dist = kernels.goal_distance(p, goal)
-    return np.where(kernels.outside_goal_region(dist, params.eps_g_m)[:, None], v, 0.0)   # eq:goal_region
+    obs_p = np.reshape(np.asarray(obs_p, float), (-1, 2))
+    release = None if release_v is None else complex(*np.asarray(release_v, float).reshape(2))
+    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups, obs_v=obs_v, release=release)
+    v = data.velocity(_planar(p), _planar(obs_p))
+    return np.stack([v.real, v.imag], -1)
 
 
 def body_command(theta, v_world) -> np.ndarray:

@@ -18,8 +18,10 @@ Freezing (F of eq:behavior_terms (13)) counts the steps with ||u_xy|| < v_freeze
 standing still at the goal is the objective, not the "persistent stagnation" F is meant to penalize (without this, every
 behavior that arrives within the horizon would be penalized against ones that circle the goal).
 
-The loop body inlines the formulas of ``behaviors`` and ``uncertainty`` (one numpy op per term over (B, M)
-arrays, no per-behavior Python); tests check it against a per-behavior reference built from those modules.
+The policy is not written here: each step calls ``behaviors.PolicyData.velocity``, the compiled policy the
+execution loop calls too, for all behaviors at once; the rest of the loop body is one numpy op per term over (B,)
+or (B, M) arrays (no per-behavior Python); tests check it against a per-behavior reference built from
+``behaviors.behavior_command`` and ``uncertainty``.
 """
 from __future__ import annotations
 
@@ -30,9 +32,8 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
-from .behaviors import (BEHAVIORS, FORWARD_M, GAIN_LIN_PER_S, GAIN_NEAR_PER_S, IS_GOAL, IS_PASS, IS_SIDE,
-                        MODE_INDEX, PASS_EXTRA_M, REVERSE, SIDE_LATERAL_M, SIGMA, alone_in_group, goal_basis,
-                        mode_indices, obstacle_groups, release_directions_c, release_velocity, speed_limits)
+from .behaviors import (BEHAVIORS, MODE_INDEX, REVERSE, PolicyData, goal_basis, mode_indices, mode_rows,
+                        release_velocity)
 from .faults import perception_fault
 from .governor import govern_c, obstacle_sigma_term
 from .prediction import predict_obstacles, q_sigma_for
@@ -90,27 +91,17 @@ class Imagination:
 
 
 class _Constants:
-    """Per (modes, params) constants of the rollout (eq:execution (1), eq:behavior_subgoals (10),
-    eq:behavior_feedback (11)), cached."""
+    """Per (modes, params) constants of the rollout (the policy rows of eq:behavior_subgoals (10) and
+    eq:behavior_feedback (11), :func:`behaviors.mode_rows`; eq:execution (1)), cached."""
 
     def __init__(self, modes: tuple[str, ...], params: StackParams):
         ex = params.uncertainty.execution
         midx = mode_indices(modes)
         self.B = len(midx)
-        self.sigma = SIGMA[midx]
-        self.goal_f = IS_GOAL[midx].astype(float)
-        self.pass_f = IS_PASS[midx].astype(float)
-        self.any_pass = bool(self.pass_f.any())
-        fwd_c = FORWARD_M[midx] * (1.0 - self.goal_f)                      # along d_g, 0 for GOAL rows
-        side_lat = np.where(IS_SIDE[midx], SIDE_LATERAL_M * self.sigma, 0.0)
-        # e_b = d_g (fwd + i lat) for PASS/SIDE/YIELD rows (eq:behavior_subgoals (10))
-        self.coef0 = fwd_c + 1j * side_lat
-        self.pass_sig_j = 1j * self.pass_f * self.sigma
-        self.goal_rows = np.flatnonzero(self.goal_f).tolist()
-        self.vmax = speed_limits(params)[midx]
-        self.is_rev = midx == MODE_INDEX[REVERSE]
-        self.governed = ~self.is_rev & (midx != MODE_INDEX["YIELD"])     # rows the speed governor applies to
-        self.any_rev = bool(self.is_rev.any())
+        self.rows = mode_rows(midx, params)
+        self.midx = midx
+        # rows the speed governor applies to (not REVERSE, not YIELD)
+        self.governed = (midx != MODE_INDEX[REVERSE]) & (midx != MODE_INDEX["YIELD"])
         # execution model, eq:execution: body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
         A = np.asarray(ex.A, float)
         self.A = A
@@ -147,127 +138,69 @@ class _Rollout:
     along: np.ndarray | None = None   # (B,) progress along the maneuver [m] (Imagination.along)
 
 
+class _Governed:
+    """The speed governor (governor.py) over a rollout: the rows it applies to and the obstacles' terms."""
+
+    def __init__(self, K: _Constants, obstacles: Obstacles, cov: np.ndarray, params: StackParams):
+        self.rows = np.flatnonzero(K.governed)
+        self.sig_k = obstacle_sigma_term(cov, params)                  # (N+1, M)
+        self.obs_vz = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
+        self.r = np.asarray(obstacles.r, float)
+        self.params = params
+
+    def __call__(self, k: int, p, rot, conj_rot, v, Ok) -> np.ndarray:
+        """Scales the governed rows of v in place; returns the filter model's velocities w* of those rows."""
+        gr = self.rows
+        s_gov, w_gov = govern_c(p[gr], rot[gr], v[gr] * conj_rot[gr], Ok, self.obs_vz, self.sig_k[k], self.r,
+                                self.params)
+        v[gr] = v[gr] * s_gov
+        return w_gov
+
+
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
              release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> _Rollout:
-    """eq:behavior_rollout (12): the closed-loop rollouts of ``modes`` (policy regenerated at every step, robot
-    propagated with the nominal eq:execution (1), obstacles with eq:obs_prop (2) and eq:cov_prop (3)). Planar vectors
-    are complex numbers (x + i y; R(theta) is multiplication by e^{i theta}); all behaviors advance together, one numpy
-    op per term and step. ``release_v`` (B,) complex: the constant world velocity of each REVERSE row (default: the
-    push)."""
-    unc = params.uncertainty
+    """eq:behavior_rollout (12): the closed-loop rollouts of ``modes``: the policy pi_b regenerated at every step
+    from the imagined state and the predicted obstacles O^k (:meth:`behaviors.PolicyData.velocity`, the same
+    compiled policy the execution loop calls), the robot propagated with the nominal eq:execution (1), the obstacles
+    with eq:obs_prop (2) and eq:cov_prop (3). Planar vectors are complex numbers (x + i y; R(theta) is
+    multiplication by e^{i theta}); all behaviors advance together. ``release_v`` (B,) complex: the constant world
+    velocity of each REVERSE row (default: the push)."""
     N, dt = params.N, params.dt_s
     K = _constants(modes, params)
     B, M = K.B, len(obstacles)
-    goal = np.asarray(goal, float)
-    pg = complex(goal[0], goal[1])
-    rR, d0 = unc.r_robot_m, unc.d0_m
-    sigma, any_pass, vmax, is_rev, any_rev = K.sigma, K.any_pass, K.vmax, K.is_rev, K.any_rev
     a_c, b_c, d_c, ideal_xy, a20, a21, dw, turning = K.a_c, K.b_c, K.d_c, K.ideal_xy, K.a20, K.a21, K.dw, K.turning
-
-    # ---- obstacles: predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
-    Oc = cov = None
-    if M:
-        P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, unc))
-        Oc = P_obs[..., 0] + 1j * P_obs[..., 1]                       # (N+1, M)
-        r = np.asarray(obstacles.r, float)
-        base = rR + r + d0                                            # r_R + r_i + d0  (M,)
-        cand_lo, cand_hi = -(rR + r), params.relevant_range_m + r
-        corridor = base + params.in_way_margin_m                     # |c_i| below this: in the way
-        release_reach = base + params.release_range_m
-        obs_vz = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]
-        flat_rows = np.arange(B) * M
-        govern = params.speed_governor and bool(K.governed.any())
-        if govern:
-            sig_k = obstacle_sigma_term(cov, params)                   # (N+1, M)
-            gov_rows = np.flatnonzero(K.governed)
-        if any_pass:     # the relevant obstacle's group (eq:behavior_subgoals (10) d_pass), from the obstacles at k = 0
-            groups = obstacle_groups(obstacles.p, r, params)
-            single = alone_in_group(groups)                            # (M,) alone in its group
-            lone = bool(single.all())
-            same_group = groups[:, None] == groups[None, :]
-
-    if start is None:
-        p = np.full(B, complex(state.px, state.py))
-        th = np.full(B, float(state.theta))
-    else:                          # one start state per row: positions (B,) complex, yaws (B,)
-        p = np.array(start[0], complex)
-        th = np.array(start[1], float)
+    Oc = cov = governed = None
+    Ok = np.zeros((N + 1, 0), complex)
+    if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
+        P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, params.uncertainty))
+        Oc = Ok = P_obs[..., 0] + 1j * P_obs[..., 1]                  # (N+1, M)
+        if params.speed_governor and K.governed.any():
+            governed = _Governed(K, obstacles, cov, params)
+    policy = PolicyData.build(K.midx, goal, obstacles.p, obstacles.r, params, obs_v=obstacles.v, release=release_v,
+                              rows=K.rows)      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
+    p, th = ((np.full(B, complex(state.px, state.py)), np.full(B, float(state.theta))) if start is None
+             else (np.array(start[0], complex), np.array(start[1], float)))   # one start state per row
     rot = np.exp(1j * th)
     conj_rot = np.conj(rot)
-    # (N+1, B) layouts: one contiguous row per step
-    Pk = np.empty((N + 1, B), complex)     # imagined positions
-    Vk = np.empty((N + 1, B), complex)     # nominal realized velocities (odom); row N repeats row N-1
-    Uk = np.empty((N + 1, B), complex)     # body commands u_x + i u_y (u_w = 0); row N repeats row N-1
-    THk = np.empty((N + 1, B))
+    # (N+1, B) layouts: one contiguous row per step; row N of V and U repeats row N-1
+    Pk, Vk, Uk, THk = (np.empty((N + 1, B), complex), np.empty((N + 1, B), complex), np.empty((N + 1, B), complex),
+                       np.empty((N + 1, B)))
     THk[:] = th
-    d_min, v_rel, eps_g = params.d_pass_min_m, params.v_release_mps, params.eps_g_m
-    coef0, pass_sig_j, goal_rows, pass_fwd = K.coef0, K.pass_sig_j, K.goal_rows, K.pass_f
-    pass_fwd0 = FORWARD_M[MODE_INDEX["PASS-L"]]     # eq:behavior_subgoals's 0.85 m
-    gain = GAIN_NEAR_PER_S + GAIN_LIN_PER_S
-    if M:
-        pass_floor = rR + r + PASS_EXTRA_M         # eq:behavior_subgoals (10) floor r_R + r_i + 0.35
-        pass_extra = rR + PASS_EXTRA_M
-
     # progress along the maneuver: only the liveness option's viability test reads it (Imagination.along)
     along = np.zeros(B) if params.speed_governor else None
     for k in range(N):
         Pk[k] = p
-        # policy pi_b (eq:goal_basis (9), eq:behavior_subgoals (10), eq:behavior_feedback (11)), regenerated from
-        # the imagined state and O^k (eq:behavior_rollout (12))
-        g = pg - p
-        dist = np.abs(g)
-        outside = kernels.outside_goal_region(dist, eps_g)             # eq:goal_region
-        dg = g / np.maximum(dist, _TINY)
-        coef = coef0
-        if any_pass and M:
-            z = (Oc[k] - p[:, None]) * np.conj(dg)[:, None]             # s_i + i c_i (B, M)
-            s = z.real
-            key = np.where((s > cand_lo) & (s < cand_hi) & (np.abs(z.imag) < corridor), s, np.inf)
-            j = key.argmin(axis=1)
-            flat = flat_rows + j
-            has = key.ravel()[flat] < np.inf
-            if lone:
-                ext = sigma * z.ravel()[flat].imag + r[j]
-            else:
-                ext = np.max(np.where(same_group[j], sigma[:, None] * z.imag + r[None, :], -np.inf), axis=1)
-            off = has * np.maximum(np.maximum(d_min, ext + pass_extra), pass_floor[j])
-            # PASS aims beside a lone relevant obstacle: forward max(0.85, s_i) (behaviors.subgoal_error)
-            ahead = np.maximum(np.where(has & single[j], key.ravel()[flat], 0.0) - pass_fwd0, 0.0)
-            coef = coef0 + pass_sig_j * off + pass_fwd * ahead
-        e = dg * coef
-        for gr in goal_rows:
-            e[gr] = g[gr]
-        # eq:behavior_feedback (11): both terms are parallel to e, so v = e min(2.35 1/s, v_max/||e||)
-        # (see feedback_velocity)
-        v = e * np.minimum(gain, vmax * outside / np.maximum(np.abs(e), _TINY))
+        v = policy.velocity(p, Ok[k])
         if along is not None:
             nv = np.abs(v)
             vdir = np.where(nv > _TINY, v / np.maximum(nv, _TINY), 0j)   # the maneuver's direction at step k
-        w_gov = None
-        if M and govern:     # the governed speed and the filter model's velocity (governor.py)
-            gr = gov_rows
-            s_gov, w_gov = govern_c(p[gr], rot[gr], v[gr] * conj_rot[gr], Oc[k], obs_vz, sig_k[k], r, params)
-            v[gr] = v[gr] * s_gov
-        if any_rev and release_v is not None:                        # chosen release velocities
-            v = np.where(is_rev, release_v * outside, v)
-        elif any_rev:                                                 # reverse-release fallback rows: the push
-            push = 0j
-            if M:
-                qz = p[:, None] - Oc[k]
-                qd = np.abs(qz)
-                w = np.maximum(release_reach - qd, 0.0)
-                push = (w * release_directions_c(qz, obs_vz)).sum(axis=1)
-            npush = np.abs(push)
-            vr = v_rel * np.where(npush > 1e-9, push / np.maximum(npush, _TINY), -dg) * outside
-            v = np.where(is_rev, vr, v)
-        u = v * conj_rot
-        Uk[k] = u
+        w_gov = None if governed is None else governed(k, p, rot, conj_rot, v, Oc[k])
+        Uk[k] = u = v * conj_rot
         # nominal execution (eq:execution) and propagation over dt
-        vreal = v if ideal_xy else kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
-        Vk[k] = vreal
+        Vk[k] = vreal = v if ideal_xy else kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
-            vreal[gr] = w_gov
+            vreal[governed.rows] = w_gov
         if along is not None:
             along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
         p = kernels.euler_step(p, vreal, dt)
@@ -350,6 +283,47 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
     return J.min(axis=1)
 
 
+def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params: StackParams,
+                   shared: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The shared barrier (eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) and the
+    analytic compatibility W~ (eq:analytic_workload (24)) of rollouts ``ro``, all (b, k, i) at once; ``speed``
+    ||u_xy|| (B, N+1). Returns h_min, W, deficit (B,) and the margin (B, N+1, M) (see :class:`Imagination`)."""
+    unc, ex = params.uncertainty, params.uncertainty.execution
+    N, K, M = params.N, ro.K, len(obstacles)
+    B = K.B
+    if not M:
+        return np.full(B, np.inf), np.zeros(B), np.zeros(B), np.zeros((B, N + 1, 0))
+    Pc, Vc, TH, Oc, cov = ro.P, ro.V, ro.TH, ro.Oc, ro.cov
+    Ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]                   # (M,)
+    q = Pc[:, :, None] - Oc[None]                                      # q_i = p - p_i (B, N+1, M)
+    q2 = q.real ** 2 + q.imag ** 2
+    relv = Vc[:, :, None] - Ov                                         # R(A u + d) - v_i
+    if shared:
+        kap = kappa_img(obstacles, unc)
+        m = kernels.uncertainty_radius(np.abs(relv), kernels.prediction_term(cov, unc)[None],
+                                       kernels.e_exec_speed(speed, ex)[:, :, None], unc)   # eq:uncertainty_margin
+        margin = kap * m
+    else:
+        margin = np.full((B, N + 1, M), params.noshared_margin_m)
+    D = kernels.inflated_radius(obstacles.r, margin, unc)              # eq:shared_barrier
+    h = kernels.barrier(q2, D)
+    h_min = h.reshape(B, -1).min(axis=1)
+    deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
+    qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
+    gamma = 2.0 * (qn.real * rn.real + qn.imag * rn.imag) + params.alpha_per_s * hn
+    # |grad_u gamma|^2 = 4 ||A_xy^T R^T q||^2 (A_xy = translational rows of A, all three u channels)
+    if K.unit_gradient:
+        grad2 = 4.0 * q2[:, :N]
+    else:
+        A = K.A
+        qb = qn * np.exp(-1j * TH[:, :N])[:, :, None]                  # R^T q
+        G = A[:2] @ A[:2].T
+        grad2 = 4.0 * (G[0, 0] * qb.real ** 2 + 2 * G[0, 1] * qb.real * qb.imag + G[1, 1] * qb.imag ** 2)
+    viol = np.maximum(-gamma, 0.0)
+    W = (viol * viol / (grad2 + params.w_eps)).reshape(B, -1).sum(axis=1)
+    return h_min, W, deficit, margin
+
+
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> Imagination:
@@ -368,53 +342,16 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     why = perception_fault(state, obstacles, goal)
     if why is not None:
         raise ValueError(f"imagine: perception fault ({why}); the planner brakes instead (control/faults.py)")
-    unc, ex = params.uncertainty, params.uncertainty.execution
     N = params.N
     goal = np.asarray(goal, float)
     pg = complex(goal[0], goal[1])
     ro = _rollout(state, obstacles, goal, params, tuple(modes),
                   None if release_v is None else np.asarray(release_v, complex), start)
-    K, Pc, Vc, Uc, TH, Oc, cov = ro.K, ro.P, ro.V, ro.U, ro.TH, ro.Oc, ro.cov
-    B, M = K.B, len(obstacles)
-    A, unit_gradient = K.A, K.unit_gradient
-    if M:
-        Ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]               # (M,)
-    U = np.zeros((B, N, 3))
+    Pc, Uc, TH = ro.P, ro.U, ro.TH
+    U = np.zeros((ro.K.B, N, 3))
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
-
-    # ---- shared barrier (eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) and
-    # analytic compatibility W~ (eq:analytic_workload (24)), all (b, k, i) at once
-    W = np.zeros(B)
-    h_min = np.full(B, np.inf)
-    deficit = np.zeros(B)
-    margin = np.zeros((B, N + 1, 0))
-    if M:
-        q = Pc[:, :, None] - Oc[None]                                  # q_i = p - p_i (B, N+1, M)
-        q2 = q.real ** 2 + q.imag ** 2
-        relv = Vc[:, :, None] - Ov                                     # R(A u + d) - v_i
-        if shared:
-            kap = kappa_img(obstacles, unc)
-            m = kernels.uncertainty_radius(np.abs(relv), kernels.prediction_term(cov, unc)[None],
-                                           kernels.e_exec_speed(speed, ex)[:, :, None], unc)   # eq:uncertainty_margin
-            margin = kap * m
-        else:
-            margin = np.full((B, N + 1, M), params.noshared_margin_m)
-        D = kernels.inflated_radius(obstacles.r, margin, unc)          # eq:shared_barrier
-        h = kernels.barrier(q2, D)
-        h_min = h.reshape(B, -1).min(axis=1)
-        deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
-        qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
-        gamma = 2.0 * (qn.real * rn.real + qn.imag * rn.imag) + params.alpha_per_s * hn
-        # |grad_u gamma|^2 = 4 ||A_xy^T R^T q||^2 (A_xy = translational rows of A, all three u channels)
-        if unit_gradient:
-            grad2 = 4.0 * q2[:, :N]
-        else:
-            qb = qn * np.exp(-1j * TH[:, :N])[:, :, None]              # R^T q
-            G = A[:2] @ A[:2].T
-            grad2 = 4.0 * (G[0, 0] * qb.real ** 2 + 2 * G[0, 1] * qb.real * qb.imag + G[1, 1] * qb.imag ** 2)
-        viol = np.maximum(-gamma, 0.0)
-        W = (viol * viol / (grad2 + params.w_eps)).reshape(B, -1).sum(axis=1)
+    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared)
 
     # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14))
     P_hist = np.stack([Pc.real, Pc.imag], -1)

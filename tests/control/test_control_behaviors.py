@@ -81,8 +81,8 @@ def test_in_a_gap_the_relevant_obstacle_is_the_one_behind_it():
     PASS-R aims beside the next post: forward 1.5, offset max(0.3, -0.09 + 0.2 + 0.5) = 0.61, floor 0.7 -> 0.7."""
     obs = Obstacles.from_lists([[0.1, 0.69], [0.1, -0.69], [1.5, 0.09]], r=0.2)
     p = np.zeros((1, 2))
-    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
-    j, c, r = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    d, _, _ = goal_basis(p, np.array([5.0, 0.0]))
+    j, c, r = relevant_obstacle(p, d, obs.p, obs.r, P)
     assert j.tolist() == [2] and c[0] == pytest.approx(0.09)
     e = subgoal_error(mode_indices(("PASS-R",)), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
     np.testing.assert_allclose(e, [[1.5, -0.7]])
@@ -92,8 +92,8 @@ def test_no_relevant_obstacle_pass_goes_for_the_goal():
     # behind the robot, beside the corridor, beyond the look-ahead: none is relevant
     obs = Obstacles.from_lists([[-1.0, 0.0], [1.0, 1.2], [4.0, 0.0]], r=0.2)
     p = np.zeros((2, 2))
-    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
-    j, _, _ = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    d, _, _ = goal_basis(p, np.array([5.0, 0.0]))
+    j, _, _ = relevant_obstacle(p, d, obs.p, obs.r, P)
     assert j.tolist() == [-1, -1]
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
     np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
@@ -108,8 +108,8 @@ def test_no_relevant_obstacle_pass_goes_for_the_goal():
 def test_relevant_obstacle_is_the_nearest_in_the_way():
     obs = Obstacles.from_lists([[2.5, 0.0], [1.2, -0.3], [0.8, 2.0]], r=0.2)
     p = np.array([[0.0, 0.0]])
-    d, n, _ = goal_basis(p, np.array([0.0 + 5.0, 0.0]))
-    j, c, r = relevant_obstacle(p, d, n, obs.p, obs.r, P)
+    d, _, _ = goal_basis(p, np.array([0.0 + 5.0, 0.0]))
+    j, c, r = relevant_obstacle(p, d, obs.p, obs.r, P)
     assert j.tolist() == [1] and c[0] == pytest.approx(-0.3) and r[0] == pytest.approx(0.2)
 
 
@@ -189,9 +189,9 @@ def test_the_in_way_band_is_each_variants_imagination_margin():
     assert noshared.in_way_margin_m == P.noshared_margin_m == 0.30
     obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
     p = np.zeros((1, 2))
-    d, n, _ = goal_basis(p, np.array([5.0, 0.0]))
-    assert relevant_obstacle(p, d, n, obs.p, obs.r, shared)[0].tolist() == [-1]
-    assert relevant_obstacle(p, d, n, obs.p, obs.r, noshared)[0].tolist() == [0]
+    d, _, _ = goal_basis(p, np.array([5.0, 0.0]))
+    assert relevant_obstacle(p, d, obs.p, obs.r, shared)[0].tolist() == [-1]
+    assert relevant_obstacle(p, d, obs.p, obs.r, noshared)[0].tolist() == [0]
 
 
 def test_alone_in_group_by_hand():
