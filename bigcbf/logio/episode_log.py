@@ -76,7 +76,8 @@ class EpisodeLogger:
             static += [(w.base_frame, child, (x, y, z), yaw) for child, (x, y, z, yaw) in sensors.items()]
             if hasattr(self.world, "model"):
                 from .urdf import robot_description
-                self.urdf = robot_description(self.world.model, sensors, base=w.base_frame)
+                self.urdf = robot_description(self.world.model, sensors, base=w.base_frame,
+                                              name=self.world.robot.name)
         w.tf_static(0.0, static)
         if self.urdf is not None:
             w.robot_description(0.0, self.urdf.text)
