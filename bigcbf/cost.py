@@ -13,8 +13,8 @@ obstacle; N the imagination / rollout steps of the stack)::
                 big-cbf(-noshared)  (T / T_B) x 6 behaviors x N x M     (the imagination)
                 mppi                (T / T_B) x samples x iterations x N x M
                 dwa                 (T / T_C) x (n_xy^2 n_wz + 1) x N x M
-                pl-cbf              (T / T_C) x (n_dir + 2) x N x M
-                backup-cbf          (T / T_C) x len(blends) x N x M
+                pl-cbf              (T / T_C) x 4 (n_angle + 2) x (horizon_s / dt) x M   (4 start states)
+                backup-cbf          (T / T_C) x 4 x (horizon_s / dt) x M
                 apf, cbf-only       (T / T_C) x M
               plus the common CBF filter (T / T_C) x (max_obstacle_constraints + wall_sectors); a method installed
               from elsewhere (an entry point, ``package.module:Class``) counts only that filter (its own cost is its
@@ -132,9 +132,9 @@ def _planner_ops(method: str | None, params, method_params, M: int, T: float) ->
     if method == "dwa" and mp is not None:
         return ticks * (mp.n_xy ** 2 * mp.n_wz + 1) * N * M
     if method == "pl-cbf" and mp is not None:
-        return ticks * (mp.n_dir + 2) * N * M
+        return ticks * 4 * (mp.n_angle + 2) * round(mp.horizon_s / params.dt_s) * M
     if method == "backup-cbf" and mp is not None:
-        return ticks * len(mp.blends) * N * M
+        return ticks * 4 * round(mp.horizon_s / params.dt_s) * M
     if method in ("apf", "cbf-only"):
         return ticks * M
     return 0.0                       # external input or a method from elsewhere: only the filter is counted

@@ -108,28 +108,31 @@ def test_apf_gradients_by_hand():
 
 
 def test_dwa_window_by_hand():
-    dp = DwaParams(acc_xy_mps2=2.0, acc_wz_radps2=3.0, window_s=0.25, n_xy=3, n_wz=3)
-    U = window_samples(RobotState(0, 0, 0, 0.2, 0.0, 0.0), P, dp)
-    # vx in [0.2 - 0.5, 0.2 + 0.5] = [-0.3, 0.7], vy in [-0.5, 0.5], wz in [-0.75, 0.75]; 27 + the stop command
-    assert len(U) == 28 and np.array_equal(U[-1], np.zeros(3))
-    assert U[:, 0].min() == pytest.approx(-0.3) and U[:, 2].max() == pytest.approx(0.75)
-    # (0.7, 0.5) is outside the 0.8 m/s disc: scaled to 0.8 / hypot(0.7, 0.5) = 0.8 / 0.86023
+    dp = DwaParams(acc_xy_mps2=2.0, acc_wz_radps2=3.0, n_xy=3, n_wz=3)
+    U = window_samples(RobotState(0, 0, 0, 0.2, 0.0, 0.0), P, dp).reshape(-1, 3)
+    # one control period T_C = 0.05 s (Fox): vx in [0.2 - 0.1, 0.2 + 0.1], vy in [-0.1, 0.1], wz in [-0.15, 0.15]
+    assert len(U) == 27
+    assert U[:, 0].min() == pytest.approx(0.1) and U[:, 0].max() == pytest.approx(0.3)
+    assert U[:, 1].min() == pytest.approx(-0.1) and U[:, 2].max() == pytest.approx(0.15)
+    # from 0.75 m/s forward, (0.85, 0.1) is clipped to the actuator box (0.8) and then onto the 0.8 m/s disc
+    U = window_samples(RobotState(0, 0, 0, 0.75, 0.0, 0.0), P, dp).reshape(-1, 3)
     corner = U[np.argmax(U[:, 0] + U[:, 1])]
-    np.testing.assert_allclose(corner[:2], np.array([0.7, 0.5]) * 0.8 / np.hypot(0.7, 0.5))
+    np.testing.assert_allclose(corner[:2], np.array([0.8, 0.1]) * 0.8 / np.hypot(0.8, 0.1))
 
 
 def test_integrate_and_barrier_by_hand():
     # u = (0.5, 0, 0) at theta = pi/2 for 2 steps of 0.1 s: +y by 0.05 m per step
     p, th = integrate(RobotState(1.0, 2.0, np.pi / 2), np.tile([0.5, 0.0, 0.0], (1, 2, 1)), 0.1, P)
     np.testing.assert_allclose(p[0], [[1.0, 2.0], [1.0, 2.05], [1.0, 2.10]], atol=1e-12)
-    # the method's own barrier at k = 0 against a static obstacle at (1, 3), r = 0.2: D = 0.15 + 0.2 + margin 0.1
-    # = 0.45 (no shared uncertainty m_i: that is the common CBF's); h = 1 - D^2; with scale 1.01: D = 1.01 * 0.35
+    # the method's barrier at k = 0 against a static obstacle at (1, 3), r = 0.2: D = 0.15 + 0.2 + d0 0.1 + margin 0.1
+    # = 0.55 (no shared uncertainty m_i: that is the common CBF's); h = 1 - D^2; with scale 1.01: D = 1.01 * 0.35 + 0.1
+    assert P.uncertainty.d0_m == 0.10
     obs = Obstacles.from_lists([[1.0, 3.0]], r=0.2)
     h = barrier_along(p, predict(obs, P, 2, 0.1), P, Geometry(0.1))
-    assert h[0, 0, 0] == pytest.approx(1.0 - 0.45 ** 2)
-    assert h[0, 2, 0] == pytest.approx(0.9 ** 2 - 0.45 ** 2)
+    assert h[0, 0, 0] == pytest.approx(1.0 - 0.55 ** 2)
+    assert h[0, 2, 0] == pytest.approx(0.9 ** 2 - 0.55 ** 2)
     h = barrier_along(p, predict(obs, P, 2, 0.1), P, Geometry(0.0, 1.01))
-    assert h[0, 0, 0] == pytest.approx(1.0 - (1.01 * 0.35) ** 2)
+    assert h[0, 0, 0] == pytest.approx(1.0 - (1.01 * 0.35 + 0.1) ** 2)
 
 
 def test_accel_limited_and_brake_rollout_by_hand():
@@ -157,19 +160,16 @@ def test_accel_limited_and_brake_rollout_by_hand():
 
 def test_backup_cbf_keeps_nominal_far_and_intervenes_near():
     pl = BackupCbfPlanner(P)
-    far = Obstacles.from_lists([[3.0, 0.0]], r=0.3)
+    far = Obstacles.from_lists([[5.0, 3.0]], r=0.3)
     u, info = pl.plan(0.0, RobotState(0, 0, 0), far, GOAL)
     assert info.mode == "NOMINAL"
     np.testing.assert_allclose(u, [0.8, 0.0, 0.0])
-    # obstacle 0.6 m ahead, r 0.3; the method's own geometry D = r_R + r_i = 0.15 + 0.3 = 0.45 m.
-    # lambda = 0: one step at 0.8 -> 0.04, brake 0.6, 0.4, 0.2, 0 -> 0.10, 0.14, 0.16: 0.6 - 0.16 = 0.44 < D: unsafe
-    # lambda = 0.25: 0.6 m/s -> 0.03, brake 0.4, 0.2, 0 -> 0.07, 0.09: 0.6 - 0.09 = 0.51 > D: certified
-    near = Obstacles.from_lists([[0.6, 0.0]], r=0.3)
+    # obstacle 0.9 m ahead, r 0.3: D = r_R + r_i + d0 = 0.55 m, 0.35 m of room. Full speed then braking covers
+    # 0.04 + 0.16 m but shrinks the backup trajectory's end value faster than alpha allows: the QP slows the robot
+    near = Obstacles.from_lists([[0.9, 0.0]], r=0.3)
     u, info = pl.plan(0.0, RobotState(0, 0, 0), near, GOAL)
-    assert info.mode == "BLEND"
-    np.testing.assert_allclose(u, [0.6, 0.0, 0.0])
-    assert pl.last_h_min[0] < 0.0 <= pl.last_h_min[1]
-    assert info.path[-1, 0] == pytest.approx(0.09)
+    assert info.mode == "BACKUP-CBF"
+    assert 0.0 <= u[0] < 0.8 and abs(u[1]) < 1e-3
 
 
 def test_pl_cbf_keeps_nominal_far_and_picks_a_certified_policy_near():

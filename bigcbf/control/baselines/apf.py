@@ -8,9 +8,10 @@ velocity (first-order, "velocity = force" form used for velocity-controlled mobi
   (e = p_g - p): bounded far away, vanishing at the goal.
 * Repulsion (:func:`repulsive_velocity`), Khatib's FIRAS form: U_rep,i = 1/2 k_rep (1/rho_i - 1/rho_0)^2 for
   rho_i <= rho_0, 0 beyond, with rho_i = ||q_i|| - D_i the distance between the robot's and the obstacle's
-  surfaces, D_i = r_R + r_i (Khatib's rho is the shortest distance to the obstacle; the method's standoff comes
-  from its influence distance rho_0, no extra margin: ``margin_m`` 0; the shared uncertainty m_i of
-  eq:uncertainty_margin is BIG-CBF's, applied to every method by the common hard CBF downstream), so
+  surfaces, D_i = r_R + r_i + d0 (the task's clearance of eq:true_safety_requirement (6): Khatib's rho is the
+  shortest distance to the region the robot must not enter; the method's standoff beyond it comes from its
+  influence distance rho_0, no extra margin: ``margin_m`` 0; the shared uncertainty m_i of
+  eq:uncertainty_margin (21) is BIG-CBF's, applied to every method by the common hard CBF downstream), so
   -grad U_rep,i = k_rep (1/rho_i - 1/rho_0) / rho_i^2 q_i/||q_i||. rho_i is floored at ``rho_min_m`` (the
   field stays finite when the estimate is already inside D_i).
 * Obstacles are taken where the shared prediction (eq:obs_prop) puts them ``lookahead_s`` ahead (the current estimate
@@ -46,7 +47,7 @@ class ApfParams:
     rho0_m: float = ranged(0.6, 0, 100, lo_open=True)  # influence distance beyond the inflated radius [m]
     rho_min_m: float = ranged(0.02, 0, 10, lo_open=True)  # floor of rho in the gradient [m]
     lookahead_s: float = ranged(0.0, 0, 10)  # where the prediction places dynamic obstacles [s]
-    margin_m: float = ranged(0.0, 0, 2)  # safety margin beyond r_R + r_i (module docstring) [m]
+    margin_m: float = ranged(0.0, 0, 2)  # safety margin beyond r_R + r_i + d0 (module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("d_conic_m", "rho0_m", "rho_min_m"),

@@ -4,8 +4,10 @@ along a horizon. The formulas are in :mod:`bigcbf.control.kernels`.
 
 Every baseline that looks ahead uses the same constant-velocity obstacle prediction with growing covariance as
 BIG-CBF (``predict_obstacles``; all methods receive identical observations). Their collision geometry is their
-own (:class:`Geometry`): D_i = scale (r_R + r_i) + margin_m, the robot's and the obstacle's radii and the method's
-own safety margin from its source (each module documents its choice). They do *not* plan with the shared
+own (:class:`Geometry`): D_i = scale (r_R + r_i) + d0 + margin_m, the task's clearance of
+eq:true_safety_requirement (6) (the robot's and the obstacle's radii and the base clearance d0, part of the task for
+every method) plus the method's own published safety margin (each module documents its choice and its source).
+They do *not* plan with the shared
 uncertainty radius m_i of ``eq:uncertainty_margin``: in the paper, sharing that uncertainty with the planning layer is
 BIG-CBF's contribution, and the common hard CBF (``bigcbf.control.cbf``) applies it to every method at execution.
 """
@@ -28,8 +30,10 @@ _TINY = 1e-12
 
 @dataclass(frozen=True)
 class Geometry:
-    """A method's own collision geometry: obstacle i is avoided at D_i = scale (r_R + r_i) + margin_m [m] (the
-    robot's footprint r_R and the obstacle's radius r_i, optionally scaled, plus the method's safety margin)."""
+    """A method's collision geometry: obstacle i is avoided at D_i = scale (r_R + r_i) + d0 + margin_m [m]: the
+    task's clearance r_R + r_i + d0 of eq:true_safety_requirement (6) (the footprint r_R and the obstacle's radius
+    r_i, optionally scaled as the method's source does, and the base clearance d0 of ``UncertaintyParams.d0_m``)
+    plus the method's own published safety margin."""
 
     margin_m: float = 0.0     # the method's own safety margin [m]
     scale: float = 1.0        # multiplies r_R + r_i [-]
@@ -39,8 +43,9 @@ class Geometry:
             raise ValueError("a planning geometry needs margin_m >= 0 and scale >= 1")
 
     def radius(self, r_obs, params: StackParams) -> np.ndarray:
-        """D_i (...,) [m] for obstacle radii r_obs (...,)."""
-        return self.scale * (params.uncertainty.r_robot_m + np.asarray(r_obs, float)) + self.margin_m
+        """D_i (...,) [m] for obstacle radii r_obs (...,): scale (r_R + r_i) + d0 + margin_m."""
+        unc = params.uncertainty
+        return self.scale * (unc.r_robot_m + np.asarray(r_obs, float)) + unc.d0_m + self.margin_m
 
 
 @dataclass(frozen=True)

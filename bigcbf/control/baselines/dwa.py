@@ -1,31 +1,35 @@
-"""DWA + CBF: the dynamic window approach of Fox, Burgard and Thrun (1997), for a holonomic base.
+"""DWA + CBF: the dynamic window approach of Fox, Burgard and Thrun (1997), "The dynamic window approach to
+collision avoidance", for a holonomic base; Nav2's DWB controller (ros-navigation/navigation2,
+nav2_dwb_controller) as the modern reading of its window and sampling.
 
-Fox et al. search the velocities reachable within a short interval (the dynamic window) that are admissible
-(the robot can stop before a collision), simulate each as a constant velocity over the horizon, and maximize
-G(v) = sigma(alpha heading + beta dist + gamma vel). Here, at every control tick:
+Fox et al. search the velocities reachable within one control interval (the dynamic window V_d), keep the
+admissible ones (V_a: the robot can stop before the first obstacle on the trajectory), and maximize
+G(v) = sigma(alpha heading(v) + beta dist(v) + gamma vel(v)) over V_r = V_s ^ V_a ^ V_d. Here, at every control
+tick (20 Hz, T_C = 0.05 s, the paper's DWA rate):
 
-* Window: body twists (vx, vy, wz) within the actuator box and |v_xy| <= v_max, reachable from the measured
-  twist within ``window_s`` at ``acc_xy_mps2`` / ``acc_wz_radps2``; a regular grid of ``n_xy`` x ``n_xy`` x
-  ``n_wz`` samples (plus the exact stop command, so braking is always a candidate). ``window_s`` = 0.25 s, not
-  one 50 ms tick: the odometry twist lags the command by the actuation delay, and a one-tick window would let
-  the planner barely change its command.
-* Rollout: each sample held for the 1.5 s horizon (N = 15 steps of dt = 0.1 s) under eq:execution (arcs when
-  wz != 0), against the shared prediction (eq:obs_prop, eq:cov_prop) of every obstacle.
-* Admissibility: the rollout stays outside every collision radius D_i = r_R + r_i (the method's own geometry: Fox et al.
-  admit a velocity when the robot's footprint can stop before touching the obstacle; no margin, ``margin_m`` 0; the
-  shared uncertainty m_i of eq:uncertainty_margin is BIG-CBF's, applied to every method by the common hard CBF
-  downstream) at every step of the 1.5 s horizon. Fox's Va (the robot can stop before the first collision on its
-  trajectory, ||v|| <= sqrt(2 a dist)) is implied: an admissible trajectory has no collision within the horizon, and the
-  braking distance at v_max, 0.8^2 / (2 * 2.0) = 0.16 m, is far shorter than the horizon's path. If no sample is
-  admissible, the sample with the largest worst-case clearance wins.
-* Objective (holonomic "heading" = goal progress): progress = ||p_0 - p_g|| - ||p_K - p_g|| [m]; dist = the
-  smallest clearance ||q_i|| - D_i over the rollout, capped at ``clearance_cap_m``; vel = ||v_xy||. As in Fox et
-  al., each term is normalized over the window (divided by its largest value) before weighting; a small penalty
-  on |wz| keeps the yaw still when turning buys nothing (circular footprint).
-* Yaw: ``n_wz`` > 1 samples wz in the window too (Fox's (v, omega) search). The default is n_wz = 1 (wz = 0
-  exactly, whatever the measured yaw rate; as the paper allows for the holonomic base): with wz sampled, blind_corner seed 0 ended in a contact (min
-  clearance -0.03 m) because the body-frame command turns with the robot during the actuation delay, which the
-  common filter (a yaw-free model) does not anticipate; with wz = 0 the same episode stays collision-free.
+* Window V_d: body velocities within acc_xy T_C of the measured twist per axis (Fox's interval is the control
+  period; DWB's ``sim_period`` likewise), intersected with the actuator box and |v_xy| <= v_max (V_s); a regular
+  grid of ``n_xy`` x ``n_xy`` samples (DWB's ``vx_samples`` default 20, used on both translational axes of the
+  holonomic base), yaw rate 0 (``n_wz`` = 1, the circular footprint gains nothing from turning; ``n_wz`` > 1
+  samples wz in the window too).
+* Trajectory: each sample held for the 1.5 s horizon (N = 15 steps of dt = 0.1 s, the paper's DWA horizon) under
+  eq:execution against the shared prediction (eq:obs_prop, eq:cov_prop).
+* dist(v): the path length travelled before the trajectory first comes within D_i = r_R + r_i + d0 + ``margin_m``
+  of an obstacle (the task's clearance of eq:true_safety_requirement (6); Fox's dist to "the closest obstacle that
+  intersects with the curvature"), measured up to the last simulated state before the first one inside D_i
+  (or, when the robot already is inside D_i, deeper inside than it starts: moving out or along stays
+  admissible); ``dist_free_m`` (the "large constant") when none does within the horizon.
+* Admissible V_a (Fox's eq. for V_a): ||v|| <= sqrt(2 dist(v) acc_xy), the robot can stop before it. If no sample is admissible the robot brakes
+  (command 0, mode DWA-NONE), as DWB stops when no trajectory is valid.
+* heading(v) = pi - |theta|, theta the angle between the motion direction and the goal as seen from the position
+  predicted one control interval ahead (Fox: "the angle of the target point relative to the robot's heading
+  direction", computed at the predicted position); a sample at rest has heading 0. vel(v) = ||v||.
+* Normalization to [0, 1] (Fox: "all three components are normalized"): heading / pi, dist / dist_free_m,
+  vel / v_max. sigma: the weighted sum smoothed over the velocity grid by a separable [1, 2, 1]/4 kernel (Fox's
+  smoothing, giving more side clearance), then the best admissible sample is taken.
+* Weights alpha, beta, gamma = ``w_heading``, ``w_clearance``, ``w_velocity`` = 2.0, 0.2, 0.2: the values quoted
+  for Fox et al.'s RHINO experiments (not re-checked against the paper's text here; a named configuration,
+  not tuned on the scenes).
 Deterministic (a grid, no sampling).
 """
 from __future__ import annotations
@@ -44,71 +48,84 @@ from .common import Geometry, at_goal, clip_command, integrate, predict, surface
 
 @dataclass(frozen=True)
 class DwaParams:
-    """Dynamic-window sampling and objective weights (Fox et al. give the form; values chosen here)."""
+    """Fox et al.'s objective and window; DWB's sample count; this robot's acceleration limits."""
 
     acc_xy_mps2: float = ranged(2.0, 0, 50, lo_open=True)  # translational acceleration limit [m/s^2]
     acc_wz_radps2: float = ranged(3.0, 0, 100)  # yaw acceleration limit [rad/s^2]
-    window_s: float = ranged(0.25, 0, 10, lo_open=True)  # interval defining the reachable window [s]
-    n_xy: int = ranged(9, 1, 101)  # grid points per translational axis [-]
-    n_wz: int = ranged(1, 1, 101)  # grid points in yaw rate [-] (1: wz = 0, see the module docstring)
-    w_heading: float = ranged(1.0, 0, 1000000.0)  # weight of goal progress [-]
-    w_clearance: float = ranged(0.3, 0, 1000000.0)  # weight of clearance [-]
-    w_velocity: float = ranged(0.1, 0, 1000000.0)  # weight of speed [-]
-    w_yaw: float = ranged(0.1, 0, 1000000.0)  # penalty on |wz| / wz_max [-]
-    clearance_cap_m: float = ranged(1.0, 0, 100, lo_open=True)  # clearance beyond this does not count [m]
-    margin_m: float = ranged(0.0, 0, 2)  # the method's own safety margin beyond r_R + r_i (module docstring) [m]
+    n_xy: int = ranged(20, 1, 101)  # grid points per translational axis [-] (DWB vx_samples)
+    n_wz: int = ranged(1, 1, 101)  # grid points in yaw rate [-] (1: wz = 0)
+    w_heading: float = ranged(2.0, 0, 1000000.0)  # alpha [-]
+    w_clearance: float = ranged(0.2, 0, 1000000.0)  # beta [-]
+    w_velocity: float = ranged(0.2, 0, 1000000.0)  # gamma [-]
+    dist_free_m: float = ranged(1.2, 0, 100, lo_open=True)  # dist of a trajectory with no obstacle (v_max x 1.5 s) [m]
+    margin_m: float = ranged(0.0, 0, 2)  # the method's margin beyond r_R + r_i + d0 (Fox et al. state none) [m]
 
     def __post_init__(self):
-        check_ranges(self, positive=("acc_xy_mps2", "window_s", "clearance_cap_m"),
-                     nonneg=("acc_wz_radps2", "w_heading", "w_clearance", "w_velocity", "w_yaw"),
+        check_ranges(self, positive=("acc_xy_mps2", "dist_free_m"),
+                     nonneg=("acc_wz_radps2", "w_heading", "w_clearance", "w_velocity"),
                      min_int={"n_xy": 1, "n_wz": 1})
 
 
 def window_samples(state: RobotState, params: StackParams, dp: DwaParams) -> np.ndarray:
-    """The dynamic window as a grid of body twists (S, 3): the current twist +- acc window_s per axis,
-    intersected with the actuator box and |v_xy| <= v_max (grid points outside the speed disc are scaled onto
-    it), plus the stop command."""
+    """The dynamic window V_d ^ V_s as a grid of body twists (n_xy, n_xy, n_wz, 3): the measured twist +- acc T_C
+    per axis, intersected with the actuator box; grid points outside the speed disc are scaled onto it."""
     lo, hi = np.asarray(params.u_min, float), np.asarray(params.u_max, float)
     cur = np.array([state.vx, state.vy, state.wz])
-    span = np.array([dp.acc_xy_mps2, dp.acc_xy_mps2, dp.acc_wz_radps2]) * dp.window_s
+    span = np.array([dp.acc_xy_mps2, dp.acc_xy_mps2, dp.acc_wz_radps2]) * params.T_C_s
     a = np.clip(cur - span, lo, hi)
     b = np.clip(cur + span, lo, hi)
     gx = np.linspace(a[0], b[0], dp.n_xy)
     gy = np.linspace(a[1], b[1], dp.n_xy)
-    gw = np.linspace(a[2], b[2], dp.n_wz) if dp.n_wz > 1 else np.zeros(1)     # n_wz = 1: wz = 0, always
-    U = np.stack(np.meshgrid(gx, gy, gw, indexing="ij"), -1).reshape(-1, 3)
-    U = np.concatenate([U, np.zeros((1, 3))])
+    gw = np.linspace(a[2], b[2], dp.n_wz) if dp.n_wz > 1 else np.zeros(1)
+    U = np.stack(np.meshgrid(gx, gy, gw, indexing="ij"), -1)
     return clip_command(U, params)
+
+
+def _smooth(G: np.ndarray) -> np.ndarray:
+    """sigma: a separable [1, 2, 1]/4 smoothing over the two translational grid axes (edges replicated)."""
+    for ax in (0, 1):
+        if G.shape[ax] > 1:
+            Gp = np.concatenate([np.take(G, [0], ax), G, np.take(G, [-1], ax)], ax)
+            n = G.shape[ax]
+            G = 0.25 * np.take(Gp, range(0, n), ax) + 0.5 * np.take(Gp, range(1, n + 1), ax) \
+                + 0.25 * np.take(Gp, range(2, n + 2), ax)
+    return G
 
 
 def dwa_scores(U: np.ndarray, state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                dp: DwaParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Rollouts and objective for the samples U (S, 3). Returns (G (S,), admissible (S,), worst clearance
-    min_k,i ||q_i|| - D_i (S,) [m] (+inf without obstacles), paths (S, N+1, 2))."""
+    """Fox's terms for the window grid U (..., 3). Returns (G = sigma(...) (...), admissible (...), dist(v) (...)
+    [m], paths (S, N+1, 2) over the flattened grid)."""
+    shape = U.shape[:-1]
+    Uf = U.reshape(-1, 3)
     K, dt = params.N, params.dt_s
-    Ur = np.repeat(U[:, None, :], K, axis=1)
-    paths, theta = integrate(state, Ur, dt, params)
+    paths, _ = integrate(state, np.repeat(Uf[:, None, :], K, axis=1), dt, params)
     goal = np.asarray(goal, float)
-    progress = np.hypot(*(state.p - goal)) - np.hypot(*(paths[:, -1] - goal).T)
-    speed = np.hypot(U[:, 0], U[:, 1])
+    speed = np.hypot(Uf[:, 0], Uf[:, 1])
     pred = predict(obstacles, params, K, dt)
+    dist = np.full(len(Uf), dp.dist_free_m)
     if pred.M:
-        sd = surface_distance(paths, pred, params, Geometry(dp.margin_m))    # (S, K+1, M)
-        clear = sd[:, 1:].min(axis=(1, 2))           # k >= 1: the sample cannot change state 0
-        admissible = clear >= 0.0
-    else:
-        clear = np.full(len(U), np.inf)
-        admissible = np.ones(len(U), bool)
-    dist = np.clip(clear, 0.0, dp.clearance_cap_m)
-
-    def norm(x):
-        top = np.max(np.abs(x))
-        return x / top if top > 1e-12 else np.zeros_like(x)
-
-    wz_max = max(abs(params.u_min[2]), abs(params.u_max[2]), 1e-9)
-    G = (dp.w_heading * norm(progress) + dp.w_clearance * norm(dist) + dp.w_velocity * norm(speed)
-         - dp.w_yaw * np.abs(U[:, 2]) / wz_max)
-    return G, admissible, clear, paths
+        sd = surface_distance(paths, pred, params, Geometry(dp.margin_m))             # (S, K+1, M)
+        # a state collides when it is inside D_i, or deeper inside than the start if that already was
+        hit = (sd[:, 1:] < np.minimum(sd[:, :1], 0.0) - 1e-9).any(axis=2)           # (S, K), states 1..K
+        first = np.where(hit.any(axis=1), hit.argmax(axis=1), -1)                    # index into 1..K, minus 1
+        seg = np.hypot(*np.diff(paths, axis=1).transpose(2, 0, 1))                     # (S, K)
+        travelled = np.concatenate([np.zeros((len(Uf), 1)), np.cumsum(seg, axis=1)], 1)
+        # dist: the path length up to the last state before the first collision (0 when the first step collides)
+        dist = np.where(first >= 0, travelled[np.arange(len(Uf)), np.maximum(first, 0)], dp.dist_free_m)
+        dist = np.minimum(dist, dp.dist_free_m)
+    admissible = speed <= np.sqrt(2.0 * dist * dp.acc_xy_mps2) + 1e-12
+    # heading at the position predicted one control interval ahead
+    c, s = np.cos(state.theta), np.sin(state.theta)
+    vw = np.stack([c * Uf[:, 0] - s * Uf[:, 1], s * Uf[:, 0] + c * Uf[:, 1]], -1)
+    p1 = state.p[None] + params.T_C_s * vw
+    to_goal = goal[None] - p1
+    theta = np.arctan2(vw[:, 0] * to_goal[:, 1] - vw[:, 1] * to_goal[:, 0], (vw * to_goal).sum(1))
+    heading = np.where(speed > 1e-9, np.pi - np.abs(theta), 0.0)
+    G = (dp.w_heading * heading / np.pi + dp.w_clearance * dist / dp.dist_free_m
+         + dp.w_velocity * speed / max(params.v_max_mps, 1e-9))
+    G = _smooth(G.reshape(shape)).reshape(-1)
+    return G.reshape(shape), admissible.reshape(shape), dist.reshape(shape), paths
 
 
 class DwaPlanner:
@@ -130,12 +147,10 @@ class DwaPlanner:
         if at_goal(state, goal, self.params):
             return np.zeros(3), PlanInfo("DWA", True, (time.perf_counter() - t0) * 1e3, None)
         U = window_samples(state, self.params, self.dwa)
-        G, ok, clear, paths = dwa_scores(U, state, obstacles, goal, self.params, self.dwa)
-        if ok.any():
-            j = int(np.argmax(np.where(ok, G, -np.inf)))
-            mode = "DWA"
-        else:                              # nothing admissible: the sample that keeps the most clearance
-            j = int(np.argmax(clear))
-            mode = "DWA-NONE"
-        u = clip_command(U[j], self.params)
-        return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, paths[j])
+        G, ok, _, paths = dwa_scores(U, state, obstacles, goal, self.params, self.dwa)
+        G, ok, Uf = G.reshape(-1), ok.reshape(-1), U.reshape(-1, 3)
+        if not ok.any():                   # no admissible velocity: brake (DWB stops without a valid trajectory)
+            return np.zeros(3), PlanInfo("DWA-NONE", True, (time.perf_counter() - t0) * 1e3, None)
+        j = int(np.argmax(np.where(ok, G, -np.inf)))
+        u = clip_command(Uf[j], self.params)
+        return u, PlanInfo("DWA", True, (time.perf_counter() - t0) * 1e3, paths[j])

@@ -12,7 +12,8 @@ numba: the array version made (512, 15, 24) temporaries and took ~80 % of a cycl
   |v| <= v_max; sample 0 is the unperturbed mean, sample 1 the stop sequence. The RNG is
   np.random.default_rng(seed) created in ``reset(seed)``: an episode is deterministic per seed.
 * Rollout: eq:execution (nominal execution model) from the current state, obstacles by the shared prediction
-  (eq:obs_prop, eq:cov_prop); the method's own collision radius D_i = r_R + r_i + ``margin_m`` with margin_m = 0.10 m,
+  (eq:obs_prop, eq:cov_prop); the collision radius D_i = r_R + r_i + d0 + ``margin_m``: the task's clearance of
+  eq:true_safety_requirement (6) plus margin_m = 0.10 m,
   the default ``collision_margin_distance`` of Nav2's MPPI controller ("margin distance from collision to apply severe
   penalty, similar to footprint inflation; between 0.05-0.2 is reasonable"; Williams et al. penalize track boundaries
   and state no obstacle margin). The shared uncertainty m_i of eq:uncertainty_margin is BIG-CBF's; the common hard CBF
@@ -65,7 +66,7 @@ class MppiParams:
     w_clear: float = ranged(2.0, 0, 1000000.0)  # running clearance cost [1/s]
     l_clear_m: float = ranged(0.15, 0, 10, lo_open=True)  # clearance cost length scale [m]
     w_smooth: float = ranged(0.05, 0, 1000000.0)  # smoothness weight [s^2/m^2]
-    margin_m: float = ranged(0.10, 0, 2)  # collision margin beyond r_R + r_i (Nav2 MPPI's default; module docstring) [m]
+    margin_m: float = ranged(0.10, 0, 2)  # collision margin beyond r_R + r_i + d0 (Nav2 MPPI's default; module docstring) [m]
 
     def __post_init__(self):
         check_ranges(self, positive=("sigma_mps", "gamma", "ess_fraction", "l_clear_m"),

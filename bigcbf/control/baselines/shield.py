@@ -11,8 +11,19 @@ velocity E(c) = R(theta)(A_xy R(theta)^T c + d_xy), which the robot reaches with
 The initial v0 is a realized velocity too (measured, or E of the command about to be sent).
 
 Safety of a rollout is the method's own barrier h_i^k = ||q_i^k||^2 - D_i^2 >= 0 (D_i of the shield's
-:class:`~bigcbf.control.baselines.common.Geometry`: footprint, obstacle radius, the method's margin) for every
-obstacle i and every state k = 0..K against the shared prediction (``eq:obs_prop``, ``eq:cov_prop``).
+:class:`~bigcbf.control.baselines.common.Geometry`: footprint, obstacle radius, d0 and the method's margin) for
+every obstacle i and every state k = 0..K against the shared prediction (``eq:obs_prop``, ``eq:cov_prop``).
+
+Both shields then impose, as their sources do, a CBF condition on the value of a policy's rollout as a function of
+the current state, dV/dt >= -alpha V (Chen et al. 2021, the backup-CBF QP: one constraint per discretized state of the backup
+trajectory; Kim et al. 2026: one on the selected policy's V = min_k h). The robot's input is a velocity command, so
+the discrete form over one control period T_C is used, V(x_1(u)) >= (1 - alpha T_C) V(x_0), with x_1(u) the state
+after T_C under u (:func:`one_step`, velocity E(u)) and x_0 the current one (measured velocity). V(x_1(u)) is
+linearized (at u_nom, then again at each answer: :func:`solve_sqp`) by finite differences of ``FD_STEP`` in the body command's vx and vy (the sensitivity matrices
+of Chen et al. and the JAX gradients of tkkim-robot/plcbf, computed numerically): :func:`value_rows` gives the
+rows C u >= l of the QP min ||u - u_nom||^2 (the authors' QP), solved exactly by ``bigcbf.control.smallqp``. The
+barrier there is the signed distance h = ||q_i|| - D_i (safe_control's ``_h_safety`` and plcbf's value function,
+both dist - radii - margin), the minimum over obstacles at each state.
 """
 from __future__ import annotations
 
@@ -28,7 +39,9 @@ from ..behaviors import behavior_command
 from ..planner import PlanInfo, fail_safe
 from .. import kernels
 from ..kernels import execution_velocity
-from .common import Geometry, Prediction, accel_limited, at_goal, barrier_along, body_from_world
+from .. import smallqp
+from .common import (Geometry, Prediction, accel_limited, at_goal, barrier_along, body_from_world,
+                     surface_distance)
 
 Policy = Callable[[int, np.ndarray, np.ndarray], np.ndarray]
 
@@ -67,6 +80,67 @@ def rollout(p0: np.ndarray, v0: np.ndarray, theta: float, policy: Policy, pred: 
     h = barrier_along(P, pred, params, geometry)
     h_min = h.min(axis=(1, 2)) if pred.M else np.full(B, np.inf)
     return Rollout(P, Vc, U, h_min)
+
+
+#: finite-difference step of the value sensitivities [m/s]
+FD_STEP = 1e-3
+
+
+def sensitivity_commands(u_nom: np.ndarray) -> np.ndarray:
+    """u_nom, u_nom + FD_STEP e_vx and u_nom + FD_STEP e_vy (3, 3) (body twists)."""
+    return np.asarray(u_nom, float)[None] + FD_STEP * np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+
+
+def min_distance(paths: np.ndarray, pred: Prediction, params: StackParams, geometry: Geometry) -> np.ndarray:
+    """h^k = min_i ||q_i^k|| - D_i along rollouts (B, K+1, 2) -> (B, K+1) [m] (+inf without obstacles)."""
+    if pred.M == 0:
+        return np.full(paths.shape[:2], np.inf)
+    return surface_distance(paths, pred, params, geometry).min(axis=2)
+
+
+def value_rows(h0: np.ndarray, h1: np.ndarray, u_nom: np.ndarray, decay: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows C u >= l (R, 3), (R,) of the discrete CBF condition h(x_1(u)) >= decay h(x_0) linearized at u_nom:
+    h0 (R,) the values from the current state, h1 (3, R) those from x_1 of ``sensitivity_commands(u_nom)``
+    (u_nom here is the linearization point),
+    decay (R,) = 1 - alpha T_C per row. Rows with a non-finite value (no obstacle) are dropped."""
+    G = (h1[1:] - h1[0]) / FD_STEP                                     # (2, R): d h / d (vx, vy)
+    ok = np.isfinite(h0) & np.isfinite(h1).all(axis=0)
+    C = np.zeros((int(ok.sum()), 3))
+    C[:, 0], C[:, 1] = G[0, ok], G[1, ok]
+    l = decay[ok] * h0[ok] - h1[0, ok] + C[:, 0] * u_nom[0] + C[:, 1] * u_nom[1]
+    return C, l
+
+
+def solve_rows(C: np.ndarray, l: np.ndarray, u_nom: np.ndarray, params: StackParams) -> np.ndarray | None:
+    """min ||u - u_nom||^2 s.t. C u >= l and the actuator box (``smallqp.solve_hard``); None when infeasible."""
+    lo, hi = np.asarray(params.u_min, float), np.asarray(params.u_max, float)
+    u0 = np.clip(np.asarray(u_nom, float), lo, hi)
+    if len(C) == 0:
+        return u0
+    status, u = smallqp.solve_hard(np.ascontiguousarray(C), np.ascontiguousarray(l, dtype=float), u0,
+                                   np.ones(3), lo, hi)
+    return u if status == smallqp.OK else None
+
+
+#: linearizations of the discrete condition per control tick (sequential QP: each relinearizes at the last answer)
+SQP_ITERATIONS = 3
+
+
+def solve_sqp(values_at: Callable[[np.ndarray], np.ndarray], h0: np.ndarray, decay: np.ndarray,
+              u_nom: np.ndarray, params: StackParams) -> np.ndarray | None:
+    """min ||u - u_nom||^2 s.t. h(x_1(u)) >= decay h(x_0) and the box, by ``SQP_ITERATIONS`` linearizations:
+    ``values_at(U (3, 3))`` gives h(x_1) (3, R) at ``sensitivity_commands(u_lin)``; the first u_lin is u_nom, each
+    next one the last QP answer. None when a QP is infeasible."""
+    u = np.asarray(u_nom, float)
+    for _ in range(SQP_ITERATIONS):
+        C, l = value_rows(h0, values_at(sensitivity_commands(u)), u, decay)
+        nxt = solve_rows(C, l, u_nom, params)
+        if nxt is None:
+            return None
+        if np.allclose(nxt, u, rtol=0, atol=1e-9):
+            return nxt
+        u = nxt
+    return u
 
 
 def one_step(p: np.ndarray, theta: float, u_body: np.ndarray, params: StackParams) -> np.ndarray:
