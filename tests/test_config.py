@@ -40,7 +40,7 @@ def test_bench_key_covers_the_whole_configuration(tmp_path):
     base = key(RunConfig())
     assert key(default_stack_params()) == base          # StackParams = the default configuration with them
     assert key(SIMULATION) != base                      # the default stack is Table I with the X3's calibrated profile
-    assert key(load_run_config(write(tmp_path, "[methods.dwa]\nn_xy = 9\n"))) == base    # an explicit default
+    assert key(load_run_config(write(tmp_path, "[methods.dwa]\nn_xy = 20\n"))) == base   # an explicit default
     changed = {
         "stack": "[stack]\nalpha_per_s = 1.4\n", "perception": "[perception]\ngate_chi2 = 8.0\n",
         "pedestrians": "[pedestrians]\nB_m = 0.25\n", "dwa": "[methods.dwa]\nn_xy = 7\n",
