@@ -401,8 +401,7 @@ class PolicyData:
                       else np.zeros(len(obs_r), int))
         groups = np.ascontiguousarray(groups, dtype=np.int64)
         push = release is None and bool(np.any(kind == REVERSE_KIND))
-        release = np.ascontiguousarray(np.broadcast_to(np.asarray(0j if release is None else release, complex),
-                                                        kind.shape))
+        release = np.array(np.broadcast_to(np.asarray(0j if release is None else release, complex), kind.shape))
         return cls(kind, coef, complex(*np.asarray(goal, float).reshape(2)), obs_r, groups, alone_in_group(groups),
                    None if obs_v is None else _planar(obs_v), release, push, policy_geometry(params), params)
 
