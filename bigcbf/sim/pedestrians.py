@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ..control.jit import kernel
 from ..params.checks import check_ranges, ranged
 from ..params.faults import EventSchedule, PedestrianTurn
 from .faults import EventProcess
@@ -139,7 +140,19 @@ class Pedestrians:
         return self._turn_dir[i].copy()
 
     def _repulsion(self, q: np.ndarray, rq: np.ndarray, A: np.ndarray) -> np.ndarray:
-        """Sum over neighbours at q (m,2) with radii rq and strengths A (k, m) of the anisotropic exponential."""
+        """Sum over neighbours at q (m,2) with radii rq and strengths A (k, m) of the anisotropic exponential
+        (compiled: ``_repulsion_exponents`` and ``_repulsion_sum``; the exponential itself is numpy's, whose bits
+        differ from the C library's that compiled code calls, so the forces are the same bits as the numpy
+        reference ``repulsion_reference``)."""
+        pr = self.params
+        q = np.ascontiguousarray(q, dtype=float)
+        rq = np.ascontiguousarray(rq, dtype=float)
+        A = np.ascontiguousarray(np.broadcast_to(A, (self.k, len(q))), dtype=float)
+        e = np.exp(_repulsion_exponents(self.p, self.r, q, rq, float(pr.B_m)))
+        return _repulsion_sum(self.p, self.v, q, A, e, float(pr.anisotropy))
+
+    def repulsion_reference(self, q: np.ndarray, rq: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """:meth:`_repulsion` in numpy (the reference its compiled form is checked against, bit for bit)."""
         pr = self.params
         diff = self.p[:, None, :] - q[None, :, :]                       # (k, m, 2) from neighbour to i
         dist = np.linalg.norm(diff, axis=2)
@@ -173,6 +186,43 @@ class Pedestrians:
         v[~active & ~self.done] = 0.0
         self.v = v
         self.p = self.p + dt * v
+
+
+@kernel
+def _repulsion_exponents(p, r, q, rq, B):
+    """(k, m): (r_i + r_j - d_ij) / B, d_ij = |p_i - q_j| (the exponent of the social force)."""
+    k, m = p.shape[0], q.shape[0]
+    out = np.empty((k, m))
+    for i in range(k):
+        for j in range(m):
+            dx, dy = p[i, 0] - q[j, 0], p[i, 1] - q[j, 1]
+            out[i, j] = (r[i] + rq[j] - np.sqrt(dx * dx + dy * dy)) / B
+    return out
+
+
+@kernel
+def _repulsion_sum(p, v, q, A, e, lam):
+    """(k, 2): sum_j A_ij e_ij w(phi_ij) n_ij, e_ij = exp(exponent) (numpy's), in numpy's order (the reference)."""
+    k, m = p.shape[0], q.shape[0]
+    out = np.zeros((k, 2))
+    for i in range(k):
+        speed = np.sqrt(v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1])
+        sm = max(speed, 1e-9)
+        hx, hy = v[i, 0] / sm, v[i, 1] / sm
+        sx, sy = 0.0, 0.0
+        for j in range(m):
+            dx, dy = p[i, 0] - q[j, 0], p[i, 1] - q[j, 1]
+            dm = max(np.sqrt(dx * dx + dy * dy), 1e-9)
+            nx, ny = dx / dm, dy / dm
+            mag = A[i, j] * e[i, j]
+            w = lam + (1 - lam) * (1 + -(hx * nx + hy * ny)) / 2 if speed > 1e-6 else 1.0
+            fx, fy = (mag * w) * nx, (mag * w) * ny
+            if j == 0:
+                sx, sy = fx, fy
+            else:
+                sx, sy = sx + fx, sy + fy
+        out[i, 0], out[i, 1] = sx, sy
+    return out
 
 
 class WorldPedestrians:
