@@ -8,7 +8,9 @@
   or on an existing cluster (``address``, e.g. ``ray://head:10001`` or ``auto``). Every node of a cluster needs
   bigcbf and its dependencies installed (the same version as the driver).
 
-Both keep at most ``2 * workers`` tasks in flight, so a killed run has started few episodes that it did not
+Both hand the tasks out longest first (:func:`bigcbf.bench.tasks.longest_first`: the estimated work of
+``bigcbf.cost``, from the scenario's time limit, scene, perception and method), so the pool does not end waiting on
+a long episode started last, and both keep at most ``2 * workers`` tasks in flight, so a killed run has started few episodes that it did not
 finish, and both send the same top-level function :func:`bigcbf.bench.tasks.guarded`, so the engine cannot change
 an episode's result.
 """
@@ -22,7 +24,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Sequence
 
 from ..errors import UserError
-from .tasks import EpisodeTask, error_row, guarded, run_episode, watch_parent
+from .tasks import EpisodeTask, error_row, guarded, longest_first, run_episode, watch_parent
 
 OnRow = Callable[[dict], None]
 EpisodeFn = Callable[[EpisodeTask], dict]
@@ -53,6 +55,7 @@ def run_local(tasks: Sequence[EpisodeTask], workers: int, on_row: OnRow, fn: Epi
     """Run ``tasks`` on a local process pool of ``workers`` processes; ``on_row(row)`` as each one ends."""
     pending = deque(tasks)
     suspects: list[EpisodeTask] = []
+    fresh_breaks = 0
     while pending or suspects:
         if suspects:   # a worker died: find which episode killed it by running each suspect alone
             task = suspects.pop(0)
@@ -72,7 +75,16 @@ def run_local(tasks: Sequence[EpisodeTask], workers: int, on_row: OnRow, fn: Epi
             while pending or inflight:
                 while pending and len(inflight) < 2 * workers:
                     task = pending.popleft()
-                    inflight[pool.submit(guarded, fn, task)] = task
+                    try:
+                        inflight[pool.submit(guarded, fn, task)] = task
+                    except BrokenProcessPool:       # a worker died since the last wait: this task never started
+                        pending.appendleft(task)
+                        break
+                if not inflight:                    # the pool broke with nothing in flight: start a new one
+                    fresh_breaks += 1
+                    if fresh_breaks > 3:
+                        raise RuntimeError("the local process pool breaks before any episode starts")
+                    break
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
                 broken = False
                 for fut in done:
@@ -84,6 +96,7 @@ def run_local(tasks: Sequence[EpisodeTask], workers: int, on_row: OnRow, fn: Epi
                         broken = True
                         continue
                     on_row(row)
+                    fresh_breaks = 0
                 if broken:
                     suspects.extend(inflight.values())
                     inflight.clear()
@@ -91,7 +104,7 @@ def run_local(tasks: Sequence[EpisodeTask], workers: int, on_row: OnRow, fn: Epi
         except BaseException:
             _kill(pool)
             raise
-        if suspects:
+        if suspects or pending:
             _kill(pool)
         else:
             pool.shutdown(wait=True)
@@ -158,7 +171,9 @@ def run_ray(tasks: Sequence[EpisodeTask], workers: int | None, on_row: OnRow, fn
 
 def run(engine: str, tasks: Sequence[EpisodeTask], workers: int | None, on_row: OnRow,
         fn: EpisodeFn = run_episode, ray_address: str | None = None) -> None:
-    """Dispatch to :func:`run_local` or :func:`run_ray`."""
+    """Dispatch to :func:`run_local` or :func:`run_ray`, the tasks longest first."""
+    if engine in ENGINES:
+        tasks = longest_first(list(tasks))
     if engine == "local":
         run_local(tasks, workers or os.cpu_count() or 1, on_row, fn)
     elif engine == "ray":

@@ -132,6 +132,33 @@ def run_episode(task: EpisodeTask) -> dict:
     return _json_safe(result.metrics())
 
 
+def estimated_cost(task: EpisodeTask, _cache: dict | None = None) -> float:
+    """The episode's estimated work in cost units (:func:`bigcbf.cost.episode_cost`: its time limit, scene,
+    perception and method), to hand the longest episodes out first; 0 when the task cannot even be read (its
+    worker then records the error at once). ``_cache``: scenarios already drawn, by (scenario_sha, seed)."""
+    from ..cost import episode_cost
+    try:
+        key = (task.scenario_sha, task.seed)
+        sc = _cache.get(key) if _cache is not None else None
+        if sc is None:
+            sc = _scenario(task)
+            if _cache is not None:
+                _cache[key] = sc
+        config = _config(task)
+        return float(episode_cost(sc, task.method, config.stack, method_params=config.method_params(task.method),
+                                  perception_params=config.perception, perception=task.perception).total)
+    except Exception:  # noqa: BLE001 - a task that cannot be read is run (and its error recorded) by its worker
+        return 0.0
+
+
+def longest_first(tasks) -> list:
+    """``tasks`` ordered by :func:`estimated_cost`, the most work first (stable: equal estimates keep their order), so
+    that a pool does not end waiting on one long episode started last."""
+    cache: dict = {}
+    costs = [estimated_cost(t, cache) for t in tasks]
+    return [tasks[i] for i in sorted(range(len(tasks)), key=lambda i: -costs[i])]
+
+
 _CODE_SHA: str | None = None
 
 
