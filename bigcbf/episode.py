@@ -31,6 +31,7 @@ from .params.stack import SIMULATION, StackParams
 from .perception.pipeline import Perception
 from .sanity import odometry_check, sensor_check
 from .scenario import Scenario
+from .sim.contacts import PERSONAL_SPACE_M, first_contact, near_miss
 from .sim.lidar import LidarConfig
 from .sim.pedestrians import SocialForceParams, WorldPedestrians
 from .sim.truth import GroundTruth
@@ -89,6 +90,15 @@ class EpisodeResult:
     m_img_p90_m: float | None = None
     m_exec_mean_m: float | None = None
     m_exec_p90_m: float | None = None
+    # contacts classified by who moved into whom, and near misses with people (bigcbf/sim/contacts.py): the first
+    # contact (kind and name of the body, normal, penetration, the robot's and the other's radial speeds), whether
+    # the robot moved into it faster than v_freeze (at fault) or not (passive); the smallest constant-velocity time
+    # to contact with a pedestrian (+inf, JSON null, when none closed); time with a pedestrian's body < 0.5 m away
+    contact: dict | None = None
+    at_fault_collision: bool = False
+    passive_collision: bool = False
+    min_time_to_contact_s: float = float("inf")
+    personal_space_s: float = 0.0
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -156,6 +166,12 @@ def checked_plan(method: str, out, t: float) -> tuple[np.ndarray, PlanInfo]:
             raise bad(f"returned PlanInfo.margins_img of shape {m.shape} ({m.dtype}), expected None or a flat "
                       "array of finite margins [m]")
     return u, info
+
+
+def _world_velocity(ts: RobotState) -> tuple[float, float]:
+    """A true state's planar velocity in the world frame [m/s] (RobotState carries it in the body frame)."""
+    c, s = np.cos(ts.theta), np.sin(ts.theta)
+    return float(c * ts.vx - s * ts.vy), float(s * ts.vx + c * ts.vy)
 
 
 def _short(value, limit: int = 60) -> str:
@@ -302,6 +318,9 @@ class Episode:
         w.command(u_safe)
         ts = w.true_state()
         self.metrics.control_step(w.t, state, ts, self.goal, u_in, u_safe, pinfo, finfo)
+        if self.peds.k:                                   # near misses with people (sim/contacts.py)
+            self.metrics.near_miss(*near_miss(self.truth.distance, (ts.px, ts.py, ts.theta), _world_velocity(ts),
+                                              self.walkers.positions(), self.walkers.velocities), PERSONAL_SPACE_M)
         rec = StepRecord(w.t, state, ts, obs_now, np.asarray(u_in), np.asarray(u_safe), pinfo.mode,
                          bool(finfo.active), bool(finfo.infeasible), np.asarray(finfo.D), pinfo.path, self._scan)
         for observer in self.observers:
@@ -315,8 +334,10 @@ class Episode:
         w = self.world
         k = self._k
         nxt = min(self._sps - k % self._sps, self._spc - k % self._spc, self._limit - k)
+        before = None
         while nxt > 0 and not self._collision:
             nb = min(nxt, w.BLOCK_STEPS)
+            before = w.true_state(), self.walkers.velocities.copy()     # the velocities a contact is judged by
             w.step(nb)
             self._k += nb
             nxt -= nb
@@ -325,6 +346,18 @@ class Episode:
             self._collision = self.truth.in_contact(w.data)
         if self._collision:
             self.done = True
+            if before is not None:
+                self._classify_contact(*before)
+
+    def _classify_contact(self, ts: RobotState, ped_v: np.ndarray) -> None:
+        """The contact just made, classified by who moved into whom (sim/contacts.py) with the robot's and the
+        pedestrians' velocities from before the physics block that made it."""
+        w = self.world
+        c = first_contact(self.truth, w.model, w.data, w.pose(), _world_velocity(ts), ts.wz,
+                          [p.name for p in self.scenario.pedestrians], self.walkers.positions(), ped_v,
+                          self.params.v_freeze_mps, w.t)
+        if c is not None:
+            self.metrics.contacted(c.as_dict())
 
     def result(self) -> EpisodeResult:
         """The episode's metrics so far (final once ``done``)."""
@@ -356,4 +389,5 @@ DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearanc
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
                       "perception_faults", "mode_history", "mode_switches_per_min", "side_reversals",
                       "lateral_reversals", "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
-                      "m_exec_mean_m", "m_exec_p90_m", "missed_scans")
+                      "m_exec_mean_m", "m_exec_p90_m", "missed_scans", "contact", "at_fault_collision",
+                      "passive_collision", "min_time_to_contact_s", "personal_space_s")

@@ -80,6 +80,12 @@ class EpisodeMetrics:
     - ``mode_history``: [(t rounded to 1 ms, mode)] at each change of the planner's mode.
     - the margins' (mean, P90) of each layer by :func:`margin_stats`, pooled over the episode (None: no sample).
     - the chatter and stall metrics of :class:`~bigcbf.control.liveness.LivenessRecorder`.
+    - contacts and near misses with people (``bigcbf/sim/contacts.py`` measures them): ``contact`` (the classified
+      first contact as a dict, None without one), ``at_fault_collision`` (the robot moved into the body faster than
+      ``v_freeze_mps``), ``passive_collision`` (a contact that is not at fault); ``min_time_to_contact_s``: the
+      smallest constant-velocity time to contact with a pedestrian over the control steps (+inf when none ever
+      closed on the robot); ``personal_space_s``: simulated time whose last control step saw a pedestrian's body
+      closer than 0.5 m to the robot's outline (``PERSONAL_SPACE_M``), counted like ``stopped_time_s``.
     """
 
     def __init__(self, R_u_diag, v_freeze_mps: float, T_C_s: float):
@@ -102,6 +108,10 @@ class EpisodeMetrics:
         self.mode_history: list[tuple[float, str]] = []
         self.liveness = LivenessRecorder(T_C_s)
         self._stopped_now = False        # the last control step saw the robot below v_freeze
+        self.contact: dict | None = None
+        self.min_ttc_s = math.inf
+        self.personal_space_s = 0.0
+        self._intruding_now = False      # the last control step saw a pedestrian within the personal space
 
     @classmethod
     def for_params(cls, params: StackParams) -> "EpisodeMetrics":
@@ -138,10 +148,25 @@ class EpisodeMetrics:
         self.liveness.add(t, state, u_safe, goal, (true_state.px, true_state.py))
         self._stopped_now = bool(np.hypot(true_state.vx, true_state.vy) < self.v_freeze_mps)   # until the next step
 
+    def near_miss(self, ttc_s: float, ped_clearance_m: float, personal_space_m: float) -> None:
+        """At a control step: the constant-velocity time to contact with the pedestrians [s] and the clearance to
+        the nearest pedestrian's body [m] (``bigcbf.sim.contacts.near_miss``); closer than ``personal_space_m``
+        intrudes until the next control step."""
+        self.min_ttc_s = min(self.min_ttc_s, float(ttc_s))
+        self._intruding_now = bool(ped_clearance_m < personal_space_m)
+
+    def contacted(self, contact: dict) -> None:
+        """The episode's first contact, classified (``bigcbf.sim.contacts.Contact.as_dict``); later ones are
+        ignored."""
+        if self.contact is None:
+            self.contact = dict(contact)
+
     def physics(self, n_steps: int, dt: float, clearance_m: float) -> None:
         """A block of ``n_steps`` physics steps of ``dt`` [s] ran; the true clearance after it [m]."""
         if self._stopped_now:
             self.stopped_s += n_steps * dt
+        if self._intruding_now:
+            self.personal_space_s += n_steps * dt
         self.min_clearance_m = min(self.min_clearance_m, clearance_m)
 
     def results(self, duration_s: float) -> dict:
@@ -158,4 +183,8 @@ class EpisodeMetrics:
             mode_history=list(self.mode_history),
             **self.liveness.metrics(self.mode_history, duration_s),
             e_cbf_infeasible=self.e_cbf_infeasible, m_img_mean_m=m_img[0], m_img_p90_m=m_img[1],
-            m_exec_mean_m=m_exec[0], m_exec_p90_m=m_exec[1])
+            m_exec_mean_m=m_exec[0], m_exec_p90_m=m_exec[1],
+            contact=None if self.contact is None else dict(self.contact),
+            at_fault_collision=bool(self.contact is not None and self.contact["at_fault"]),
+            passive_collision=bool(self.contact is not None and not self.contact["at_fault"]),
+            min_time_to_contact_s=self.min_ttc_s, personal_space_s=round(self.personal_space_s, 4))
