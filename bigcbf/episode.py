@@ -21,7 +21,7 @@ import numpy as np
 from .control.cbf import CbfFilter
 from .cost import check_episode_cost
 from .control.kernels import goal_distance, in_goal_region
-from .control.methods import make_planner
+from .control.methods import filter_params, make_planner
 from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
 from .control.prediction import age_obstacles
@@ -218,7 +218,7 @@ class Episode:
         self.planner = None if method is None else make_planner(method, params, method_params)
         if self.planner is not None:
             self.planner.reset(self.seed)
-        self.cbf = CbfFilter(params)
+        self.cbf = CbfFilter(filter_params(self.planner, params))    # a method may set filter switches (dpcbf)
         self.perception = Perception(self.world.robot.perception_params(perception_params))   # its laser mount
         self.goal = scenario.goal
         self.observers: list[Callable[[StepRecord], None]] = []

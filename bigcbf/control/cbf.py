@@ -41,6 +41,19 @@ slack QP's solution is the answer (fallback "qp-retry", not infeasible). If the 
 brakes (u = 0, inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input").
 The output is always finite and inside the box.
 
+The last resort (``StackParams.cbf_last_resort``) is what an infeasible step commands: "slack" (the default, the
+paper's configuration: the least-violation command above), "brake" (u = 0: the robot stops and keeps still, so a
+contact that follows is the other's doing; fallback "brake"), or "evade" (the full-speed sidestep, at v_max, across
+the path of the obstacle whose row the least-violation command violates most, on the side of that path where the
+robot is, projected on the other obstacles' rows by the same slack QP; fallback "evade"; when that obstacle is a wall
+point or moves slower than ``cbf_velocity_min_speed_mps``, the least-violation command). Every variant is still
+clipped to the box and its row violation measured.
+
+The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): every selected tracked obstacle
+that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same
+D_i^exec; the rows go through the same pre-check, QP and last resort. ``FilterInfo.rows`` names each counted row's
+obstacle, ``FilterInfo.n_velocity_rows`` how many of them are cone rows. With the switch off nothing of this runs.
+
 Perception faults (``bigcbf.control.faults``): when an obstacle estimate has a NaN or an infinity anywhere (p, v,
 cov, r), or is implausible (a negative or absurd radius, a covariance that is not symmetric positive semi-definite
 or absurdly large, an absurd position or speed), or the robot state is, the filter does not use any of the
@@ -67,6 +80,7 @@ from ..types import Obstacles, RobotState
 from . import smallqp
 from .faults import MAX_COVARIANCE_M2, MAX_POSITION_M, MAX_RADIUS_M, MAX_SPEED_MPS, perception_fault
 from .jit import kernel
+from .velocity_barrier import sidestep_target, velocity_rows
 
 FEAS_TOL = 1e-7        # a normalized row may be violated by this much [m/s] and still count as satisfied
 #: exact-penalty weight of the slack in the least-violation QP (module docstring): the rows are normalized, so
@@ -82,13 +96,17 @@ class FilterInfo:
 
     active: bool                 # the filter changed the (box-clipped) command: some CBF row was violated
     infeasible: bool             # the QP had no solution (least-violation or brake fallback used)
-    fallback: str | None         # None, "least-violation", "brake", "qp-retry", "invalid-input", "perception-fault"
+    fallback: str | None         # None, "least-violation", "brake", "evade", "qp-retry", "invalid-input",
+    #                              "perception-fault"
     solve_ms: float              # time of the whole filter call [ms]
     n_constraints: int           # CBF rows considered (when a QP ran: those left after dropping box-redundant rows)
     h_min: float                 # min_i h_i^exec over all obstacles [m^2] (+inf without obstacles)
     D: np.ndarray                # D_i^exec for every obstacle (M,) [m]
     max_violation: float = 0.0   # largest normalized CBF-row violation of u_safe [m/s]
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # obstacle index of each counted row
+    #: of the counted rows, those of the velocity-aware barrier (StackParams.cbf_velocity_rows; its rows follow the
+    #: distance rows in ``rows``)
+    n_velocity_rows: int = 0
     #: kappa_exec m_i (eq:shared_barrier: D_i - r_R - r_i - d0) [m] of the obstacles selected as CBF rows (before rows
     #: that hold over the whole actuator box are dropped)
     margins: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -388,8 +406,17 @@ class CbfFilter:
                 return self._brake_for_fault(u_in, obstacles, fault, t0)
         idx = select_constraints(obstacles, rows, self.params)
         margins = rows.margin[idx]
-        u, viol, active, C, lvec, idx, hopeless = _prepare(rows.C, rows.l, np.asarray(idx, np.int64), u_in, self.lo,
-                                                           self.hi, FEAS_TOL)
+        C_all, l_all, idx = rows.C, rows.l, np.asarray(idx, np.int64)
+        owner = None
+        if self.params.cbf_velocity_rows:
+            # the velocity-aware barrier (velocity_barrier.py): cone rows after the distance rows, numbered M + k
+            Cv, lv_, own = self._velocity_rows(state, obstacles, rows, idx, u_in)
+            if len(lv_):
+                M = len(rows.l)
+                C_all, l_all = np.vstack((rows.C, Cv)), np.concatenate((rows.l, lv_))
+                owner = np.concatenate((np.arange(M), own))
+                idx = np.concatenate((idx, M + np.arange(len(lv_), dtype=np.int64)))
+        u, viol, active, C, lvec, idx, hopeless = _prepare(C_all, l_all, idx, u_in, self.lo, self.hi, FEAS_TOL)
         infeasible = False
         if active:
             x = None if hopeless else self._solve_qp(C, lvec, u_in, cache=True)
@@ -399,15 +426,58 @@ class CbfFilter:
                 u = x
             else:
                 u, fallback, infeasible = self._infeasible(C, lvec, u_in, fallback)
+                if infeasible and self.params.cbf_last_resort != "slack":
+                    u, fallback = self._last_resort(state, obstacles, rows, C, lvec, idx, owner, u)
                 if not np.isfinite(u).all():
                     u, fallback = np.zeros(3), "brake"
                 u, viol = _clip_violation(C, lvec, u, self.lo, self.hi)
         h = rows.h
+        n_vel = 0
+        if owner is not None:
+            n_vel = int(np.count_nonzero(idx >= len(rows.l)))
+            idx = owner[idx]
         info = FilterInfo(active=bool(active), infeasible=infeasible, fallback=fallback,
                           solve_ms=(time.perf_counter() - t0) * 1e3, n_constraints=len(lvec),
                           h_min=float(h.min()) if len(h) else math.inf, D=rows.D, max_violation=max(float(viol), 0.0),
-                          rows=idx, margins=margins)
+                          rows=idx, margins=margins, n_velocity_rows=n_vel)
         return u, info
+
+    def _velocity_rows(self, state: RobotState, obstacles: Obstacles, rows: CbfRows, idx: np.ndarray, u_in):
+        """The collision-cone rows of the selected obstacles (``velocity_barrier.velocity_rows``), D_i^exec from
+        ``rows``: (C, l, owner)."""
+        p = self.params
+        _, Axy, _, _, ident = _consts(p)
+        d = p.uncertainty.execution.d
+        return velocity_rows(float(state.px), float(state.py), float(state.theta), float(u_in[0]), float(u_in[1]),
+                             float(u_in[2]), _f64(obstacles.p), _f64(obstacles.v), _f64(rows.D),
+                             np.ascontiguousarray(obstacles.ids, dtype=np.int64), idx, Axy, float(d[0]), float(d[1]),
+                             float(p.cbf_velocity_horizon_s), float(p.cbf_velocity_min_speed_mps), ident, self.lo,
+                             self.hi)
+
+    def _last_resort(self, state, obstacles, rows, C, lvec, sel, owner, u_slack):
+        """StackParams.cbf_last_resort other than "slack" (module docstring), when the QP is infeasible: "brake"
+        gives u = 0; "evade" the full-speed sidestep across the path of the obstacle of the worst row of the slack
+        solution, projected on the other obstacles' rows by the least-violation QP (the slack solution when that
+        obstacle is a wall point or slower than ``cbf_velocity_min_speed_mps``). Returns (u, fallback)."""
+        p = self.params
+        if p.cbf_last_resort == "brake":
+            return np.zeros(3), "brake"
+        obst = sel if owner is None else owner[sel]
+        k = int(np.argmax(lvec - C @ u_slack))
+        j = int(obst[k])
+        v_j = np.asarray(obstacles.v[j], float)
+        if int(obstacles.ids[j]) < 0 or float(np.hypot(v_j[0], v_j[1])) < p.cbf_velocity_min_speed_mps:
+            return u_slack, "least-violation"
+        _, Axy, _, _, _ = _consts(p)
+        target = sidestep_target(float(state.theta), rows.q[j], v_j, p.v_max_mps, Axy,
+                                 np.asarray(p.uncertainty.execution.d[:2], float))
+        others = obst != j
+        if not others.any():
+            return np.minimum(np.maximum(target, self.lo), self.hi), "evade"
+        lv = self._least_violation(np.ascontiguousarray(C[others]), np.ascontiguousarray(lvec[others]), target)
+        if lv is None:
+            return u_slack, "least-violation"
+        return lv[1], "evade"
 
     def _brake_for_fault(self, u_in: np.ndarray, obstacles: Obstacles, fault: str, t0: float):
         """A perception fault (module docstring): u_safe = 0, nothing of the estimates used."""

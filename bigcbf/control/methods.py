@@ -15,6 +15,7 @@ name, a module that cannot be imported, an attribute that is missing or not a pl
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import time
 from functools import lru_cache
@@ -53,9 +54,29 @@ class CbfOnlyPlanner:
         return u, PlanInfo(mode="GOAL", planned=True, planner_ms=(time.perf_counter() - t0) * 1e3, path=None)
 
 
+class DpcbfPlanner(CbfOnlyPlanner):
+    """DPCBF: CBF-only's GOAL command through the common filter with the velocity-aware barrier on
+    (``StackParams.cbf_velocity_rows``: a collision-cone row per moving obstacle, ``bigcbf.control.velocity_barrier``;
+    docs/fidelity.md, "The velocity-aware barrier"). The episode builds its filter from ``filter_params``."""
+
+    name = "dpcbf"
+
+    def __init__(self, params: StackParams):
+        super().__init__(params)
+        self.filter_params = dataclasses.replace(params, cbf_velocity_rows=True)
+
+
+def filter_params(planner, params: StackParams) -> StackParams:
+    """The parameters of the common filter for ``planner``: its ``filter_params`` when it has them (a method that
+    is defined by a filter switch, e.g. ``dpcbf``), else the episode's."""
+    own = getattr(planner, "filter_params", None)
+    return own if isinstance(own, StackParams) else params
+
+
 METHODS.register("big-cbf", lambda params: BigCbfPlanner(params, shared=True))
 METHODS.register("big-cbf-noshared", lambda params: BigCbfPlanner(params, shared=False))
 METHODS.register("cbf-only", CbfOnlyPlanner)
+METHODS.register("dpcbf", DpcbfPlanner)
 
 from . import baselines as _baselines  # noqa: E402  (the five comparison methods register themselves here)
 

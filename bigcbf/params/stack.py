@@ -159,6 +159,10 @@ class UncertaintyParams:
                 raise FieldError(k, f"must be a finite number >= 0, got {v}")
 
 
+#: StackParams.cbf_last_resort's choices (bigcbf.control.cbf)
+LAST_RESORTS = ("slack", "brake", "evade")
+
+
 @dataclass(frozen=True)
 class StackParams:
     """Everything the BIG-CBF stack needs (Table I defaults; choices not in the paper documented here).
@@ -194,6 +198,15 @@ class StackParams:
       release chosen by what it makes possible (docs/fidelity.md, liveness); false (default):
       eq:behavior_feedback (11) at the nominal limits v_b^max, selection on eq:behavior_acceptance (22) alone, release
       by least barrier deficit.
+    - ``cbf_velocity_rows`` (default false: the paper's filter), ``cbf_velocity_horizon_s``,
+      ``cbf_velocity_min_speed_mps``: the velocity-aware barrier of the common filter (issue 23), one collision-cone
+      row (C3BF's set with the shared D_i^exec as radius, truncated at the horizon tau) per tracked obstacle moving
+      at least that fast, beside its distance row (``bigcbf.control.velocity_barrier``; docs/fidelity.md, "The
+      velocity-aware barrier").
+    - ``cbf_last_resort``: what the filter commands when no command satisfies every row (``bigcbf.control.cbf``):
+      ``slack`` (default, the least worst-case violation, then minimum intervention), ``brake`` (u = 0) or
+      ``evade`` (a full-speed sidestep across the path of the obstacle of the worst row, if it moves, projected on
+      the other rows by the same least-violation QP).
     """
 
     T_B_s: float = ranged(0.5, 0.002, 60)  # behavior-selection period [s]
@@ -228,6 +241,10 @@ class StackParams:
     max_obstacle_constraints: int = ranged(12, 0, 1000)  # tracked obstacles in the CBF at most [-]
     wall_sectors: int = ranged(8, 0, 360)  # bearing sectors for wall-point constraints [-]
     speed_governor: bool = False        # opt-in: BIG-CBF's policies move at the speed the CBF admits (governor.py)
+    cbf_velocity_rows: bool = False     # opt-in: a collision-cone row per moving obstacle in the common filter
+    cbf_velocity_horizon_s: float = ranged(1.0, 0.1, 60)  # time horizon tau of the collision cone [s]
+    cbf_velocity_min_speed_mps: float = ranged(0.2, 0, 5)  # slower tracked obstacles get no cone row [m/s]
+    cbf_last_resort: str = "slack"      # the filter when no command satisfies every row: slack, brake or evade
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):
@@ -263,6 +280,11 @@ class StackParams:
             raise FieldError("H_diag", "must be > 0 (H positive definite)")
         if not all(r >= 0 and math.isfinite(r) for r in self.R_u_diag):
             raise FieldError("R_u_diag", "must be >= 0")
+        if self.cbf_last_resort not in LAST_RESORTS:
+            raise FieldError("cbf_last_resort", f"must be one of {', '.join(LAST_RESORTS)}, got "
+                             f"{str(self.cbf_last_resort)[:40]!r}")
+        if not isinstance(self.cbf_velocity_rows, bool):
+            raise FieldError("cbf_velocity_rows", f"must be true or false, got {self.cbf_velocity_rows!r}")
 
     @property
     def weights(self) -> tuple[float, float, float, float, float]:
