@@ -172,3 +172,33 @@ def test_an_episode_with_a_fast_walker_catching_the_robot_in_a_corridor_is_passi
     assert c["kind"] == "pedestrian" and c["name"] == "runner" and c["other_radial_mps"] > 1.0
     assert c["robot_radial_mps"] <= V_FREEZE and c["normal"][1] < -0.7          # hit from behind (+y)
     assert res.min_time_to_contact_s < 0.5 and res.personal_space_s > 0.1
+
+
+def test_bench_summary_counts_contacts_by_fault_with_wilson_intervals(tmp_path):
+    """summarize and summary.md by hand: of 4 episodes, 1 at-fault and 1 passive contact, 1 near miss (TTC 0.6 s
+    without contact), one that never met a person; a row from before the classification counts in no rate."""
+    import sys
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent / "bench"))
+    from test_bench_report import row
+
+    from bigcbf.bench import report
+    from bigcbf.bench.stats import wilson_pct
+
+    def ep(seed, collision=False, fault=False, ttc=math.inf, space=0.0):
+        return row("a", "dwa", seed, success=not collision, timeout=False, collision=collision,
+                   at_fault_collision=collision and fault, passive_collision=collision and not fault,
+                   min_time_to_contact_s=ttc, personal_space_s=space)
+    rows = [ep(0, True, True, 0.1, 1.0), ep(1, True, False, 0.2, 2.0), ep(2, ttc=0.6, space=0.5), ep(3)]
+    s = report.summarize(rows)
+    assert (s["collisions"], s["at_fault_collisions"], s["passive_collisions"]) == (2, 1, 1)
+    assert s["at_fault_collision_pct"] == 25.0 and s["at_fault_collision_ci95_pct"] == wilson_pct(1, 4)
+    assert s["near_miss_pct"] == 25.0 and s["near_miss_ci95_pct"] == wilson_pct(1, 4)
+    assert s["min_time_to_contact_s"] == pytest.approx(0.3) and s["personal_space_s"] == pytest.approx(0.875)
+    old = row("a", "dwa", 9, collision=True)                        # recorded before: no classification
+    assert report.summarize([old])["at_fault_collisions"] is None
+    assert report.summarize(rows + [old])["at_fault_collision_pct"] == 25.0
+    summary = report.build_summary(rows, ["dwa"], ["a"], [0, 1, 2, 3])
+    md = report.summary_markdown(summary)
+    assert "Contacts: at fault or passive, and near misses" in md
+    assert f"| DWA + CBF | 4 | 2 | 1: 25.0 [{wilson_pct(1, 4)[0]:.1f}, {wilson_pct(1, 4)[1]:.1f}] | 1: 25.0 [" in md
+    assert report._heatmap_contacts(s) == "hit 1F 1P" and report._heatmap_contacts(report.summarize([old])) == "hit 1"

@@ -22,6 +22,14 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
   on the robot's own odometry, as in the paper; an odometry fault makes the two differ).
 - ``missed_scans``: mean over episodes of the LiDAR scans that never arrived (a scan-dropout fault).
 - ``collisions``, ``timeouts``: counts.
+- contacts by who moved (``bigcbf/sim/contacts.py``): ``at_fault_collisions`` / ``passive_collisions``, the counts
+  of episodes whose contact the robot drove into (its radial speed above v_freeze) / did not, with
+  ``at_fault_collision_pct``, ``passive_collision_pct`` and their Wilson intervals (``*_ci95_pct``), over the
+  episodes that record the classification (``None`` when none does: rows from before it existed);
+  ``personal_space_s``: mean over episodes of the time a pedestrian's body was within 0.5 m of the robot;
+  ``min_time_to_contact_s``: mean over the episodes in which some pedestrian closed on the robot of the smallest
+  constant-velocity time to contact; ``near_miss_pct``: the share of the episodes with such a time below 1 s
+  and no contact (``NEAR_MISS_TTC_S``), with its Wilson interval.
 - ``planner_p95_ms``, ``cbf_p95_ms``, ``perception_p95_ms``: mean over episodes of each episode's P95 wall time
   (wall-clock figures: they depend on the machine and its load, unlike every other number here).
 - chatter and stall (defined in bigcbf/control/liveness.py), means over episodes: ``mode_switches_per_min``,
@@ -90,6 +98,7 @@ def summarize(rows: Iterable[dict]) -> dict:
         "qp_infeasible_pct": 100.0 * infeasible / steps if steps else None,
         "collisions": sum(bool(m["collision"]) for m in ok),
         "timeouts": sum(bool(m["timeout"]) for m in ok),
+        **contact_figures(ok),
         "planner_p95_ms": _mean([m["planner_p95_ms"] for m in ok]),
         "cbf_p95_ms": _mean([m["cbf_p95_ms"] for m in ok]),
         "perception_p95_ms": _mean([m["perception_p95_ms"] for m in ok]),
@@ -99,6 +108,54 @@ def summarize(rows: Iterable[dict]) -> dict:
         **{k: _mean([m.get(k) for m in ok]) for k in MARGIN_KEYS},
         **{k: _mean([m.get(k) for m in ok]) for k in LIVENESS_KEYS},
     }
+
+
+#: a near miss: an episode without contact whose smallest time to contact with a pedestrian was below this [s]
+NEAR_MISS_TTC_S = 1.0
+
+
+def contact_figures(ok: Sequence[dict]) -> dict:
+    """The contacts by who moved and the near misses of a group's episode metrics (module docstring)."""
+    rated = [m for m in ok if "at_fault_collision" in m]
+    n = len(rated)
+    out = {}
+    for kind in ("at_fault", "passive"):
+        k = sum(bool(m[f"{kind}_collision"]) for m in rated)
+        out[f"{kind}_collisions"] = k if n else None
+        out[f"{kind}_collision_pct"] = 100.0 * k / n if n else None
+        out[f"{kind}_collision_ci95_pct"] = wilson_pct(k, n)
+    ttc = [m.get("min_time_to_contact_s") for m in rated]
+    near = sum(1 for m, t in zip(rated, ttc) if t is not None and t < NEAR_MISS_TTC_S and not m["collision"])
+    out.update(personal_space_s=_mean([m.get("personal_space_s") for m in rated]),
+               min_time_to_contact_s=_mean(ttc), near_miss_pct=100.0 * near / n if n else None,
+               near_miss_ci95_pct=wilson_pct(near, n))
+    return out
+
+
+def _contact_cell(s: dict, kind: str) -> str:
+    """'n: % [95 % CI]' of at-fault or passive collisions, '–' without the classification."""
+    k = s.get(f"{kind}_collisions")
+    if k is None:
+        return "–"
+    return f"{k}: " + fmt_ci(s.get(f"{kind}_collision_pct"), s.get(f"{kind}_collision_ci95_pct"))
+
+
+def _contacts_lines(labels: Sequence[str], stats: Sequence[dict], h: str, first: str = "Method") -> list[str]:
+    """The contacts by who moved and the near misses, one row per group."""
+    lines = [f"{h}# Contacts: at fault or passive, and near misses", ""]
+    lines += _table([first, "Episodes", "Collisions", "At fault: n, % [95 % CI]", "Passive: n, % [95 % CI]",
+                     "Near misses (%) [95 % CI]", "Min TTC (s)", "Personal space (s)"],
+                    ([display(lab), str(s["ok"]), _f(s["collisions"]), _contact_cell(s, "at_fault"),
+                      _contact_cell(s, "passive"), fmt_ci(s.get("near_miss_pct"), s.get("near_miss_ci95_pct")),
+                      _f(s.get("min_time_to_contact_s")), _f(s.get("personal_space_s"), 1)]
+                     for lab, s in zip(labels, stats)))
+    lines += ["", "At fault: the robot moved into the body it touched (its speed along the contact normal above "
+              "v_freeze = 0.05 m/s at first contact); passive: it did not (stopped, moving away or along; e.g. a "
+              "walker faster than the robot catching it). Near misses: episodes without contact whose smallest "
+              f"constant-velocity time to contact with a pedestrian was below {NEAR_MISS_TTC_S:g} s. Min TTC: mean "
+              "of that smallest time over the episodes in which a pedestrian closed on the robot. Personal space: "
+              "mean time with a pedestrian's body within 0.5 m of the robot (bigcbf/sim/contacts.py).", ""]
+    return lines
 
 
 #: the per-episode chatter and stall metrics (EpisodeResult) averaged in ``summarize``
@@ -309,6 +366,7 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
               "code versions the method's episodes ran with; Config: the run configuration's hash (the episode "
               "key's params_hash).", ""]
     lines += _paired_lines(summary, h)
+    lines += _contacts_lines(methods, [per_m[m] for m in methods], h)
     lines += [f"{h}# Chatter and stall", ""]
     lines += _liveness_table(methods, [per_m[m] for m in methods], first="Method")
     lines += ["", LIVENESS_NOTE, ""]
@@ -479,14 +537,15 @@ def _family_sections(summary: dict, h: str) -> list[str]:
                         ([display(m)] + [_f(fam[m][split][f]["success_pct"], 0) for f in families + ["all"]]
                          for m in methods))
         lines += ["", f"{h}# Per family, split {split}", ""]
-        head = ["Method", "Family", "Episodes", "Success (%) [95 % CI]", "Collisions", "Timeouts", "Time (s)",
-                "Switches/min", "Reversals (modes)", "Reversals (command)", "No progress (s)"]
+        head = ["Method", "Family", "Episodes", "Success (%) [95 % CI]", "Collisions", "At fault", "Passive",
+                "Timeouts", "Time (s)", "Switches/min", "Reversals (modes)", "Reversals (command)",
+                "No progress (s)"]
         body = []
         for m in methods:
             for f in families + ["all"]:
                 s = fam[m][split][f]
                 body.append([display(m), f, str(s["ok"]), fmt_ci(s["success_pct"], s.get("success_ci95_pct")),
-                             _f(s["collisions"]),
+                             _f(s["collisions"]), _contact_cell(s, "at_fault"), _contact_cell(s, "passive"),
                              _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["mode_switches_per_min"], 1),
                              _f(s["side_reversals"]), _f(s["lateral_reversals"]), _f(s["no_progress_s"], 1)])
         lines += _table(head, body, align="ll" + "r" * (len(head) - 2)) + [""]
@@ -516,6 +575,10 @@ def _fault_sections(summary: dict, h: str) -> list[str]:
              "level: level none is the shipped scene itself). Faults and levels: bigcbf/bench/faults.py and the "
              "tables below.", ""]
     lines += _table(["Method"] + faults, cells("collisions"))
+    lines += ["", f"{h}# At-fault collisions per method and fault ({levels})", "",
+              "Contacts the robot moved into (its speed along the contact normal above v_freeze at first contact; "
+              "the others were passive: bigcbf/sim/contacts.py).", ""]
+    lines += _table(["Method"] + faults, cells("at_fault_collisions"))
     lines += ["", f"{h}# Success per method and fault (%, {levels})", ""]
     lines += _table(["Method"] + faults, cells("success_pct", 0))
     for f in faults:
@@ -523,14 +586,14 @@ def _fault_sections(summary: dict, h: str) -> list[str]:
         lines += ["", f"{h}# Fault {f}: {d['description']}", "",
                   f"Scenes: {', '.join(s.replace('_', ' ') for s in d['scenes'])}. "
                   + " ".join(f"{lv}: {txt}." for lv, txt in d["levels_described"].items()), ""]
-        head = ["Method", "Level", "Episodes", "Success (%)", "Collisions", "Timeouts", "Time (s)", "Clearance (m)",
-                "Goal error (m)", "QP infeas. (%)", "Missed scans"]
+        head = ["Method", "Level", "Episodes", "Success (%)", "Collisions", "At fault", "Timeouts", "Time (s)",
+                "Clearance (m)", "Goal error (m)", "QP infeas. (%)", "Missed scans"]
         body = []
         for m in methods:
             for lv, per_m in d["levels"].items():
                 s = per_m[m]
                 body.append([display(m), lv, str(s["ok"]), _f(s["success_pct"], 1), _f(s["collisions"]),
-                             _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["min_clearance_m"]), _f(s["goal_error_m"]),
+                             _f(s["at_fault_collisions"]), _f(s["timeouts"]), _f(s["time_s"], 1), _f(s["min_clearance_m"]), _f(s["goal_error_m"]),
                              _f(s["qp_infeasible_pct"]), _f(s["missed_scans"], 1)])
         lines += _table(head, body, align="ll" + "r" * (len(head) - 2))
     lines += ["", "Clearance: mean over episodes of the minimum true clearance. Goal error: the true distance to the "
@@ -567,23 +630,39 @@ def plot_heatmap(summary: dict, path: Path) -> None:
                     color=colour, fontweight="bold")
             ci = cells[i][j].get("success_ci95_pct")
             if ci is not None:          # the 95 % Wilson interval under the rate
-                ax.text(j, i + 0.25, f"{ci[0]:.0f}-{ci[1]:.0f}", ha="center", va="center", fontsize=6, color=colour)
+                ax.text(j, i + 0.18, f"{ci[0]:.0f}-{ci[1]:.0f}", ha="center", va="center", fontsize=6, color=colour)
+            hits = _heatmap_contacts(cells[i][j])
+            if hits:                    # contacts: at fault / passive (or all, unclassified)
+                ax.text(j, i + 0.38, hits, ha="center", va="center", fontsize=5, color=colour)
     ax.set_xticks(range(len(scenarios)), [s.replace("_", "\n") for s in scenarios], fontsize=8)
     ax.set_yticks(range(len(methods)), [display(m) for m in methods], fontsize=9)
     ax.tick_params(length=0)
     n = len(summary["bench"]["seeds"])
     if summary.get("by_fault"):
         ax.set_title(f"Success rate (%) per method, fault and level (none: without the fault)\n({n} "
-                     f"seed{'s' if n != 1 else ''} per scene, paired)", fontsize=10)
+                     f"seed{'s' if n != 1 else ''} per scene, paired{HIT_NOTE})", fontsize=10)
     elif fam:
         ax.set_title(f"Success rate (%) per method, family and split\n({n} seed{'s' if n != 1 else ''} per world, "
-                     "paired)", fontsize=10)
+                     f"paired{HIT_NOTE})", fontsize=10)
     else:
         ax.set_title(f"Success rate (%) per method and scenario, 95 % interval below\n({n} seed{'s' if n != 1 else ''} "
-                     "each, paired)", fontsize=10)
+                     f"each, paired{HIT_NOTE})", fontsize=10)
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.02, label="success (%)")
     fig.tight_layout()
     _savefig(fig, path)
+
+
+#: the heatmaps' legend of their contact lines
+HIT_NOTE = "; hit nF mP: contacts at fault / passive"
+
+
+def _heatmap_contacts(s: dict) -> str:
+    """A heatmap cell's contact line: 'hit 2F 1P' (at fault, passive), 'hit 3' unclassified, '' without."""
+    if not s.get("collisions"):
+        return ""
+    if s.get("at_fault_collisions") is None:
+        return f"hit {s['collisions']}"
+    return f"hit {s['at_fault_collisions']}F {s['passive_collisions']}P"
 
 
 def plot_burden(summary: dict, path: Path) -> None:
