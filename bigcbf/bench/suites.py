@@ -115,3 +115,15 @@ SUITES.add(Suite(
     f"({', '.join(faults.LEVELS)}), on shipped scenes where each matters, beside the same scenes without the fault "
     "(split and family none); files written to DIR/faults/", _faults, default_seeds=5,
     split_names=(faults.REFERENCE, *faults.LEVELS)))
+
+
+def _francis2023(out: Path) -> list[SuiteEntry]:
+    """The 13 archetypes' files of bigcbf/scenarios/francis2023/ (family: the archetype, split: francis2023)."""
+    from . import francis2023
+    return [SuiteEntry(str(path), francis2023.SPLIT, name) for name, path in francis2023.files().items()]
+
+
+SUITES.add(Suite(
+    "francis2023", "the 13 social-navigation archetypes of Francis et al. 2023 (Fig. 7 a-f, i-o, as robot_sf maps "
+    "them) at the X3's scale (bigcbf/scenarios/francis2023/), one person each, 30 paired seeds; success per "
+    "archetype", _francis2023, default_seeds=30))
