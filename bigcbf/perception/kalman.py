@@ -9,6 +9,8 @@ Sec. 6.2.2) with power spectral density q [m^2/s^3].
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 
@@ -30,10 +32,21 @@ def cv_process_noise(dt: float, q: float) -> np.ndarray:
     return q * np.block([[dt ** 3 / 3 * I, dt ** 2 / 2 * I], [dt ** 2 / 2 * I, dt * I]])
 
 
-def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction over dt: x' = F x (eq:obs_prop (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
+@lru_cache(maxsize=64)
+def _cv_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """(F, Q) for one (dt, q), built once: scans come at a fixed rate, so a tracker meets a few dt only (read-only
+    arrays: the cache hands out the same objects; F.T stays the transposed view it always was, so the matrix
+    products see the same memory layout and give the same bits)."""
     F = cv_transition(dt)
     Q = cv_process_noise(dt, q)
+    for a in (F, Q):
+        a.flags.writeable = False
+    return F, Q
+
+
+def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction over dt: x' = F x (eq:obs_prop (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
+    F, Q = _cv_model(float(dt), float(q))
     return x @ F.T, F @ P @ F.T + Q
 
 
