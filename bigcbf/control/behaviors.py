@@ -213,20 +213,28 @@ def _feedback(ex, ey, v_max):
 
 
 @kernel
+def _row_subgoal(b, kind, coef, pz, goal, obs_z, obs_r, groups, alone, geo):
+    """Row b's subgoal error e_b (eq:goal_basis (9), eq:behavior_subgoals (10), :func:`_subgoal`) and its distance
+    to the goal ||p_g - p||. coef (4, B): forward, SIDE lateral, sigma, v_b^max (:func:`mode_rows`)."""
+    px, py = pz[b].real, pz[b].imag
+    ex, ey, dist, dx, dy = _basis(px, py, goal)
+    sx, sy = _subgoal(kind[b], coef[0, b], coef[1, b], coef[2, b], px, py, ex, ey, dx, dy, obs_z, obs_r, groups,
+                      alone, geo)
+    return sx, sy, dist
+
+
+@kernel
 def _policy_rows(kind, coef, pz, goal, obs_z, obs_r, groups, alone, release, geo, out):
     """pi_b of every row b into ``out`` (B,) complex world velocities [m/s]: zero inside the goal region
     (eq:goal_region (5)), ``release[b]`` for a REVERSE row, else eq:behavior_feedback (11) towards the subgoal of
-    eq:behavior_subgoals (10). coef (4, B): forward, SIDE lateral, sigma, v_b^max (:func:`mode_rows`)."""
+    eq:behavior_subgoals (10)."""
     for b in range(pz.shape[0]):
-        px, py = pz[b].real, pz[b].imag
-        ex, ey, dist, dx, dy = _basis(px, py, goal)
+        sx, sy, dist = _row_subgoal(b, kind, coef, pz, goal, obs_z, obs_r, groups, alone, geo)
         if not _outside_goal_region(dist, geo[5]):
             out[b] = 0j
         elif kind[b] == REVERSE_KIND:
             out[b] = release[b]
         else:
-            sx, sy = _subgoal(kind[b], coef[0, b], coef[1, b], coef[2, b], px, py, ex, ey, dx, dy, obs_z, obs_r,
-                              groups, alone, geo)
             vx, vy = _feedback(sx, sy, coef[3, b])
             out[b] = complex(vx, vy)
 
@@ -235,10 +243,7 @@ def _policy_rows(kind, coef, pz, goal, obs_z, obs_r, groups, alone, release, geo
 def _subgoal_rows(kind, coef, pz, goal, obs_z, obs_r, groups, alone, geo, out):
     """:func:`_subgoal` of every row into ``out`` (B, 2)."""
     for b in range(pz.shape[0]):
-        px, py = pz[b].real, pz[b].imag
-        ex, ey, _, dx, dy = _basis(px, py, goal)
-        out[b] = _subgoal(kind[b], coef[0, b], coef[1, b], coef[2, b], px, py, ex, ey, dx, dy, obs_z, obs_r,
-                          groups, alone, geo)
+        out[b, 0], out[b, 1], _ = _row_subgoal(b, kind, coef, pz, goal, obs_z, obs_r, groups, alone, geo)
 
 
 @kernel
