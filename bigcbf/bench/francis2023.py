@@ -33,7 +33,7 @@ SEEDS = 30
 
 def files() -> dict[str, Path]:
     """Archetype -> its scenario file, in Francis et al.'s order."""
-    return {name: FOLDER / f"{name}.toml" for name, _ in ARCHETYPES}
+    return {name: FOLDER / f"francis2023_{name}.toml" for name, _ in ARCHETYPES}
 
 
 def draft(sc):
@@ -57,8 +57,9 @@ def draft(sc):
     for w in sc.walls:
         pts += [np.array(w.start), np.array(w.end)]
     for b in sc.boxes:
-        r = float(np.hypot(*b.half_size))
-        pts += [np.array(b.center) - r, np.array(b.center) + r]
+        c, s = np.cos(b.yaw_rad), np.sin(b.yaw_rad)
+        pts += [np.array(b.center) + [c * u - s * v, s * u + c * v]
+                for u in (-b.half_size[0], b.half_size[0]) for v in (-b.half_size[1], b.half_size[1])]
     for c in sc.cylinders:
         pts += [np.array(c.center) - c.radius_m, np.array(c.center) + c.radius_m]
     p = np.array(pts)
