@@ -14,7 +14,7 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
-from .governor import govern_command
+from .governor import GOVERNED_MODES, govern_command
 from .imagination import Imagination, choose_release, imagine
 from .planner import PlanInfo, clip_command, fail_safe
 from .selection import BehaviorSelector, Selection
@@ -100,7 +100,7 @@ class BigCbfPlanner:
         mode = self.selector.mode
         u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
                          self.params)                                   # eq:online_behavior_command (8)
-        if mode not in (REVERSE, "YIELD"):
+        if mode in GOVERNED_MODES:
             u = govern_command(state, obstacles, u, self.params)[0]                           # governor.py
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,
                            margins_img=self._margins if planned else None)

@@ -71,7 +71,11 @@ import numpy as np
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
 from . import kernels
+from .behaviors import BEHAVIORS
 
+#: the modes the governor applies to, at every control tick and in every rollout: the moving behaviors (YIELD
+#: commands zero; the REVERSE fallback keeps its chosen release velocity)
+GOVERNED_MODES: tuple[str, ...] = tuple(m for m in BEHAVIORS if m != "YIELD")
 #: the scales s tried, largest first [-]
 GOVERNOR_GRID = np.linspace(1.0, 0.0, 11)
 #: rows of the filter model: the most violated ones at each scale [-]

@@ -32,10 +32,9 @@ import numpy as np
 
 from ..params.stack import StackParams
 from ..types import Obstacles, RobotState
-from .behaviors import (BEHAVIORS, MODE_INDEX, REVERSE, PolicyData, goal_basis, mode_indices, mode_rows,
-                        release_velocity)
+from .behaviors import BEHAVIORS, REVERSE, PolicyData, goal_basis, mode_indices, mode_rows, release_velocity
 from .faults import perception_fault
-from .governor import govern_c, obstacle_sigma_term
+from .governor import GOVERNED_MODES, govern_c, obstacle_sigma_term
 from .prediction import predict_obstacles, q_sigma_for
 from . import kernels
 from .uncertainty import has_dynamic, kappa_img
@@ -100,8 +99,7 @@ class _Constants:
         self.B = len(midx)
         self.rows = mode_rows(midx, params)
         self.midx = midx
-        # rows the speed governor applies to (not REVERSE, not YIELD)
-        self.governed = (midx != MODE_INDEX[REVERSE]) & (midx != MODE_INDEX["YIELD"])
+        self.governed = np.array([m in GOVERNED_MODES for m in modes], bool)   # rows the speed governor applies to
         # execution model, eq:execution: body realized = a u + b conj(u) + d (translation), wz = A[2,:2] u + d_w
         A = np.asarray(ex.A, float)
         self.A = A
