@@ -37,7 +37,7 @@ outside of a parabola), so the QP needs an affine row, and
 So the filter uses the **collision cone (C3BF's set)**, with two adaptations:
 
 1. *Radius*: the shared D_i^exec of eq:shared_barrier (20) (r_R + r_i + d0 + kappa_exec m_i, m_i of
-   eq:uncertainty_margin (19) at u_in, as the distance row), not r_R + r_i: the same margin in both rows.
+   eq:uncertainty_margin (21) at u_in, as the distance row), not r_R + r_i: the same margin in both rows.
 2. *Horizon and affine row*: the cone is truncated at a time horizon tau (``cbf_velocity_horizon_s``): only relative
    velocities that reach the disk within tau count, as in velocity obstacles (VO_tau; van den Berg et al., "Reciprocal
    n-body collision avoidance", ISRR 2011). VO_tau = {w: |q_i + t w| < D_i for some t in (0, tau]} is convex (the
