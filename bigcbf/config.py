@@ -18,6 +18,10 @@ defaults, or the ``base`` given to :func:`load_run_config`)::
     [methods.dwa]           # a method's own parameters (its params_type): apf, backup-cbf, dwa, mppi, pl-cbf,
     n_xy = 9                # or a user method with a params_type, e.g. [methods."my_pkg.planners:MyPlanner"]
 
+    [route]                 # RouteParams (bigcbf/control/route.py): the route layer under EVERY method (a map from
+    enabled = true          # the robot's scans, an A* path, its look-ahead point as the method's goal); off by
+    lookahead_m = 1.5       # default (the paper's set-up); ``bigcbf run/bench --route on`` sets enabled
+
 BIG-CBF, BIG-CBF-NoShared and CBF-only have no table of their own: their parameters are the stack's. Unknown
 tables and keys, values of the wrong type or out of range are a UserError naming the file and the field
 (``methods.dwa.n_xy``). The LiDAR and the robot profile are not part of this file (the scenario file holds the
@@ -25,7 +29,8 @@ robot profile).
 
 The bench hashes the whole configuration (:func:`config_toml`: every table with every key, defaults filled in)
 into each episode's key, so two files that mean the same thing give the same key, and changing any parameter
-gives new rows.
+gives new rows. The ``[route]`` table is part of that text only when it differs from the default (the route layer
+off, every default), so the keys of the paper's set-up do not change with it.
 """
 from __future__ import annotations
 
@@ -36,13 +41,14 @@ from pathlib import Path
 from typing import Any
 
 from .control.methods import METHODS, method_params_type
+from .control.route import RouteParams
 from .errors import UserError
 from .params.perception import PerceptionParams
 from .params.stack import StackParams, default_stack_params
 from .params.toml_io import from_dict, load_toml, to_dict
 from .sim.pedestrians import SocialForceParams
 
-TABLES = ("stack", "perception", "pedestrians", "methods")
+TABLES = ("stack", "perception", "pedestrians", "methods", "route")
 
 
 @dataclass(frozen=True)
@@ -56,6 +62,8 @@ class RunConfig:
     #: method name -> its parameters (an instance of the method's ``params_type``); methods not listed use
     #: their defaults
     methods: dict[str, Any] = field(default_factory=dict)
+    #: the route layer (bigcbf/control/route.py) under every method; off by default (the paper's set-up)
+    route: RouteParams = RouteParams()
 
     def method_params(self, method: str) -> Any:
         """The parameters of ``method`` (None for a method without a ``params_type``)."""
@@ -84,7 +92,8 @@ def run_config_from_dict(data: dict, *, file: str | None = None, base: RunConfig
         if not isinstance(value, dict):
             raise UserError(f"expected a table, got {value!r}", file=file, field=key)
     parts: dict[str, Any] = {}
-    for key, cls in (("stack", StackParams), ("perception", PerceptionParams), ("pedestrians", SocialForceParams)):
+    for key, cls in (("stack", StackParams), ("perception", PerceptionParams), ("pedestrians", SocialForceParams),
+                     ("route", RouteParams)):
         if key in data:
             parts[key] = from_dict(cls, _merge(to_dict(getattr(base, key)), data[key]), file=file, prefix=key)
     methods = dict(base.methods)
@@ -102,7 +111,8 @@ def run_config_from_dict(data: dict, *, file: str | None = None, base: RunConfig
         start = to_dict(methods[name]) if name in methods else {}
         methods[name] = from_dict(ptype, _merge(start, table), file=file, prefix=where)
     return RunConfig(stack=parts.get("stack", base.stack), perception=parts.get("perception", base.perception),
-                     pedestrians=parts.get("pedestrians", base.pedestrians), methods=methods)
+                     pedestrians=parts.get("pedestrians", base.pedestrians), methods=methods,
+                     route=parts.get("route", base.route))
 
 
 def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfig:
@@ -112,7 +122,8 @@ def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfi
 
 def config_dict(config: RunConfig) -> dict:
     """The whole configuration as a TOML document: every table, every key, and a table for every registered
-    method with parameters of its own (defaults filled in), plus every other method the configuration names."""
+    method with parameters of its own (defaults filled in), plus every other method the configuration names, and
+    the ``[route]`` table when it is not the default (the route layer off)."""
     methods = {}
     for name in METHODS.names():
         ptype = method_params_type(name)
@@ -120,8 +131,11 @@ def config_dict(config: RunConfig) -> dict:
             methods[name] = to_dict(config.methods.get(name, ptype()))
     for name, params in config.methods.items():
         methods[name] = to_dict(params)
-    return {"stack": to_dict(config.stack), "perception": to_dict(config.perception),
-            "pedestrians": to_dict(config.pedestrians), "methods": dict(sorted(methods.items()))}
+    out = {"stack": to_dict(config.stack), "perception": to_dict(config.perception),
+           "pedestrians": to_dict(config.pedestrians), "methods": dict(sorted(methods.items()))}
+    if config.route != RouteParams():
+        out["route"] = to_dict(config.route)
+    return out
 
 
 def config_toml(config: RunConfig) -> str:

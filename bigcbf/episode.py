@@ -25,6 +25,7 @@ from .control.methods import filter_params, make_planner
 from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
 from .control.prediction import age_obstacles
+from .control.route import RouteLayer, RouteParams
 from .errors import UserError
 from .params.perception import PerceptionParams
 from .params.stack import SIMULATION, StackParams
@@ -193,12 +194,14 @@ class Episode:
         :class:`bigcbf.config.RunConfig`; ``kwargs`` as for the constructor (perception, time_limit_s, ...)."""
         return cls(scenario, method, seed, config.stack, perception_params=config.perception,
                    pedestrian_params=config.pedestrians,
-                   method_params=None if method is None else config.method_params(method), **kwargs)
+                   method_params=None if method is None else config.method_params(method),
+                   route=config.route, **kwargs)
 
     def __init__(self, scenario: Scenario, method: str | None, seed: int, params: StackParams = SIMULATION,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
                  lidar: LidarConfig | None = None, time_limit_s: float | None = None,
-                 pedestrian_params: SocialForceParams = SocialForceParams(), method_params=None):
+                 pedestrian_params: SocialForceParams = SocialForceParams(), method_params=None,
+                 route: RouteParams | None = None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
@@ -221,10 +224,19 @@ class Episode:
         self.cbf = CbfFilter(filter_params(self.planner, params))    # a method may set filter switches (dpcbf)
         self.perception = Perception(self.world.robot.perception_params(perception_params))   # its laser mount
         self.goal = scenario.goal
+        # the route layer (control/route.py): its look-ahead point is the method's goal; success stays the real goal
+        mount = self.perception.params
+        self.route = None if route is None or not route.enabled else RouteLayer(
+            route, params.uncertainty.r_robot_m, params.uncertainty.d0_m,
+            (mount.laser_x_m, mount.laser_y_m, mount.laser_yaw_rad))
         self.observers: list[Callable[[StepRecord], None]] = []
         # results that would be false without a word (bigcbf/sanity.py): warnings beside MuJoCo's, and their lines
         self.sanity_warnings, self.notes = sensor_check(self.world.scene, self.world.lidar.config, params,
                                                         scenario.robot_profile)
+
+    def _stack_pose(self) -> RobotState:
+        """The pose the stack works with: the odometry (the truth in the ``truth`` perception mode)."""
+        return self.world.odom() if self.perception_mode == "lidar" else self.world.true_state()
 
     def _estimate(self, scan, odom: RobotState) -> Obstacles:
         if self.perception_mode == "truth":
@@ -255,6 +267,8 @@ class Episode:
         self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
         self.state: RobotState | None = None       # the stack's state at the pending control tick
         self.done = False
+        if self.route is not None:
+            self.route.reset(self._stack_pose().p, self.goal)
         self._observe()
 
     def _observe(self) -> None:
@@ -274,6 +288,9 @@ class Episode:
                     t0 = time.perf_counter()
                     self._obstacles = self._estimate(scan, w.odom())
                     self.metrics.scan(1e3 * (time.perf_counter() - t0))
+                    if self.route is not None:   # the map from the stack's own pose; moving tracks not burned in
+                        pose = self._stack_pose()
+                        self.route.scan(scan, (pose.px, pose.py, pose.theta), self._obstacles)
                     self._scan_t = w.t
                 else:
                     self.metrics.scan(None)
@@ -311,7 +328,8 @@ class Episode:
         w, state = self.world, self.state
         obs_now = self.obstacles_now()
         if u_in is None:
-            u_in, pinfo = checked_plan(self.method, self.planner.plan(w.t, state, obs_now, self.goal), w.t)
+            goal = self.goal if self.route is None else self.route.local_goal(w.t, state, self.goal)
+            u_in, pinfo = checked_plan(self.method, self.planner.plan(w.t, state, obs_now, goal), w.t)
         else:
             u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
         u_safe, finfo = self.cbf.filter(state, obs_now, u_in)

@@ -44,6 +44,10 @@ def add_arguments(p):
                    help="stack parameters / uncertainty profile TOML over the configuration's [stack] (default: the "
                         "suite's; for paper, Table I with the twin-calibrated profile of the simulated X3); part of "
                         "the episode key")
+    p.add_argument("--route", choices=["on", "off"], default=None,
+                   help="every method under the route layer (on) or not (off: the paper's set-up), as the "
+                        "configuration's [route] enabled (default: the configuration's, off); part of the key. Run "
+                        "the bench once with each (two --out folders) to compare all methods with it off and on")
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",
@@ -78,11 +82,13 @@ def _int(value: str, option: str, minimum: int, maximum: int | None = None) -> i
 def config_from_args(args):
     """A BenchConfig from parsed arguments (through :func:`bigcbf.api.bench_config`); every mistake is a UserError
     (one line, exit 2)."""
+    from dataclasses import replace
+
     from ..api import bench_config
     from ..bench.suites import SUITES
     from ..errors import UserError
     from .argtypes import MAX_SEED
-    from .run import stderr_note
+    from .run import stderr_note, with_route
 
     if args.seed_list is not None:
         if len(args.seed_list) > MAX_SEEDS:
@@ -94,10 +100,11 @@ def config_from_args(args):
         seeds = SUITES.get(args.suite).default_seeds
     max_workers = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1) if args.engine == "local" else MAX_RAY_WORKERS
     workers = None if args.workers is None else _int(args.workers, "--workers", 1, max_workers)
-    return bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
-                        workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
-                        profile=args.profile, perception=args.perception, split=args.split,
-                        notes=stderr_note)
+    bc = bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
+                      workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
+                      profile=args.profile, perception=args.perception, split=args.split,
+                      notes=stderr_note)
+    return replace(bc, config=with_route(bc.config, args.route))
 
 
 def run(args) -> int:

@@ -28,6 +28,10 @@ def add_arguments(p):
                         "sensors, faults): a shipped robot profile (x3_sim, x3_hardware) or a robot-profile .toml; "
                         "replaces the robot profile the scenario builds on (its robot_profile_base, default x3_sim); "
                         "the scenario's own [robot_profile] keys (a slippery floor, its faults) still apply on top")
+    p.add_argument("--route", choices=["on", "off"], default=None,
+                   help="the route layer under the method (bigcbf/control/route.py: a map from the robot's own scans, "
+                        "an A* path on it, its look-ahead point as the method's goal), as the configuration's [route] "
+                        "enabled (default: the configuration's, off: the paper's set-up)")
     p.add_argument("--time-limit", type=float_in_closed(0.0, MAX_TIME_LIMIT_S, "a time limit in seconds"),
                    default=None, metavar="S",
                    help=f"end the episode (a timeout) after S simulated seconds, 0 < S <= {MAX_TIME_LIMIT_S:g} "
@@ -87,6 +91,14 @@ def load_run_scenario(scenario, seed: int, robot_profile=None):
     return replace(sc, robot_profile_base=str(robot_profile))
 
 
+def with_route(config, route: str | None):
+    """``config`` with its route layer switched on or off by ``--route`` (None: as the configuration says)."""
+    from dataclasses import replace
+    if route is None:
+        return config
+    return config.replace(route=replace(config.route, enabled=route == "on"))
+
+
 def run(args) -> int:
     import sys
 
@@ -101,7 +113,7 @@ def run(args) -> int:
     # before any work: no output onto an input (the scenario file, a profile) or onto the other output
     check_distinct({"scenario": scenario.file, "--config": args.config, "--profile": args.profile,
                     "--robot-profile": args.robot_profile}, {"--video": args.video, "--log": args.log})
-    config = load_config(args.config, args.profile, notes=stderr_note)
+    config = with_route(load_config(args.config, args.profile, notes=stderr_note), args.route)
     from ..sanity import describe, sensor_check
     for line in sensor_check(scenario.scene(), scenario.robot_profile.lidar, config.stack, scenario.robot_profile)[1]:
         stderr_note(line)                            # at the start: a sensor that cannot see the scene's obstacles

@@ -8,6 +8,13 @@ cbf_qp_p95_ms: one CbfFilter.filter call with 8 obstacle constraints plus the bo
 a control loop where consecutive commands are close).
 cbf_pass_p95_ms: a filter call whose box-clipped u_in is already safe (no QP).
 plan_tick_p95_ms: a BIG-CBF plan() call between selections (eq:online_behavior_command (8) policy regeneration only).
+route_scan_p95_ms, route_plan_p95_ms, route_goal_p95_ms: the route layer (control/route.py) on its default 18 m x 10 m
+grid of 0.1 m cells (an 8 m route's start-goal box widened by the 5 m margin), on synthetic 360-beam
+scans of a U-shaped pocket on the goal line with four walkers (two of them moving): one scan into the map (every
+scan, 10 Hz), one replan (inflation + A*, replan_hz), one look-ahead point between replans (every control tick).
+route_tick_mean_ms: their cost per control tick T_C at those rates (medians: a scan every 1 / (10 Hz T_C) ticks, a
+replan every 1 / (replan_hz T_C), a look-ahead point every tick); ``bigcbf perf`` gives each as X_steps too, its
+ratio to the bare physics step (a control tick is T_C / dt = 25 physics steps).
 """
 from __future__ import annotations
 
@@ -16,10 +23,11 @@ import time
 import numpy as np
 
 from ..params.stack import SIMULATION
-from ..types import Obstacles, RobotState
+from ..types import LaserScan, Obstacles, RobotState
 from .big_cbf import BigCbfPlanner
 from .cbf import CbfFilter
 from .metrics import percentile
+from .route import RouteLayer, RouteParams
 
 
 def _scene(rng: np.random.Generator) -> tuple[RobotState, Obstacles, np.ndarray]:
@@ -40,6 +48,63 @@ def _scene(rng: np.random.Generator) -> tuple[RobotState, Obstacles, np.ndarray]
 def _p(ts, q) -> float:
     """The q-th percentile of timings ``ts`` [s] in ms (the project's one rule, ``metrics.percentile``)."""
     return round(percentile(np.asarray(ts) * 1e3, q), 4)
+
+
+def _pocket_scan(x: float, y: float, walkers: np.ndarray, n: int = 360) -> LaserScan:
+    """A 360-beam scan from (x, y) (heading 0, laser at the centre) of a U-shaped pocket open toward the robot
+    (back wall x = 5, arms y = +-1.5 from x = 2.5), a corridor's walls y = +-4 and walkers (k, 2) of radius 0.25."""
+    ang = -np.pi + 2 * np.pi / n * np.arange(n)
+    c, s = np.cos(ang), np.sin(ang)
+    r = np.full(n, np.inf)
+    segs = [((5.0, -1.5), (5.0, 1.5)), ((2.5, 1.5), (5.0, 1.5)), ((2.5, -1.5), (5.0, -1.5)),
+            ((-2.0, 4.0), (10.0, 4.0)), ((-2.0, -4.0), (10.0, -4.0))]
+    for (ax, ay), (bx, by) in segs:           # ray-segment intersections
+        ex, ey = bx - ax, by - ay
+        den = c * ey - s * ex
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((ax - x) * ey - (ay - y) * ex) / den
+            u = ((ax - x) * s - (ay - y) * c) / den
+        ok = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+        r = np.where(ok, np.minimum(r, t), r)
+    for wx, wy in walkers:                    # ray-circle intersections
+        px, py = wx - x, wy - y
+        b = c * px + s * py
+        disc = b * b - (px * px + py * py - 0.25 ** 2)
+        t = b - np.sqrt(np.maximum(disc, 0.0))
+        r = np.where((disc >= 0) & (t > 0), np.minimum(r, t), r)
+    r = np.where(r <= 12.0, r, np.inf)
+    return LaserScan(0.0, -np.pi, 2 * np.pi / n, 0.15, 12.0, r.astype(np.float32))
+
+
+def _route(quick: bool, params) -> dict:
+    rp = RouteParams(enabled=True)
+    layer = RouteLayer(rp, params.uncertainty.r_robot_m, params.uncertainty.d0_m)
+    goal = np.array([8.0, 0.0])
+    n = 30 if quick else 150
+    scan_ts, plan_ts, goal_ts = [], [], []
+    for rep in range(2):                      # the first pass compiles (or loads) the kernels
+        layer.reset((0.0, 0.0), goal)
+        for k in range(n):
+            x, y = 0.015 * k, 0.01 * k
+            walkers = np.array([[1.5 + 0.01 * k, 2.5], [6.5, -2.0 + 0.02 * k], [1.0, -2.5], [7.0, 2.5]])
+            obs = Obstacles.from_lists(walkers, v=[[0.2, 0.0], [0.0, 0.4], [0.0, 0.0], [0.0, 0.0]], r=0.25)
+            state = RobotState(x, y, 0.0)
+            t0 = time.perf_counter()
+            layer.scan(_pocket_scan(x, y, walkers), (x, y, 0.0), obs)
+            t1 = time.perf_counter()
+            layer.plan(state.p)
+            t2 = time.perf_counter()
+            layer.local_goal(0.0, state, goal)   # between replans: the look-ahead point only
+            t3 = time.perf_counter()
+            if rep and k:                     # (k = 0: local_goal's first call plans)
+                scan_ts.append(t1 - t0)
+                plan_ts.append(t2 - t1)
+                goal_ts.append(t3 - t2)
+    rate_scan, rate_tick = 10.0, 1.0 / params.T_C_s
+    per_tick = (rate_scan * np.median(scan_ts) + rp.replan_hz * np.median(plan_ts)) / rate_tick + np.median(goal_ts)
+    return {"route_scan_p95_ms": _p(scan_ts, 95), "route_plan_p95_ms": _p(plan_ts, 95),
+            "route_plan_median_ms": _p(plan_ts, 50), "route_goal_p95_ms": _p(goal_ts, 95),
+            "route_scan_median_ms": _p(scan_ts, 50), "route_tick_mean_ms": round(1e3 * float(per_tick), 4)}
 
 
 def bench(quick: bool = False) -> dict:
@@ -96,4 +161,5 @@ def bench(quick: bool = False) -> dict:
         "cbf_qp_median_ms": _p(qp_ts, 50),
         "cbf_qp_rows_mean": round(float(np.mean(n_rows)), 2),
         "cbf_pass_p95_ms": _p(pass_ts, 95),
+        **_route(quick, params),
     }
