@@ -226,3 +226,24 @@ def test_run_route_flag(trap, capsys):
     assert main(["run", str(trap), "--method", "cbf-only", "--route", "on", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["success"] is True
     assert main(["run", str(trap), "--route", "maybe"]) == 2
+
+
+def test_bench_route_flag_is_part_of_the_key(trap, tmp_path):
+    from bigcbf.bench.runner import plan
+    from bigcbf.cli import build_parser
+    from bigcbf.cli.bench import config_from_args
+
+    def tasks(*extra):
+        args = build_parser().parse_args(["bench", "--out", str(tmp_path / "b"), "--methods", "cbf-only",
+                                          "--scenarios", str(trap), "--seeds", "1", *extra])
+        bc = config_from_args(args)
+        return bc.config.route.enabled, plan(bc)[0][0]
+
+    (on, t_on), (off, t_off), (default, t_default) = tasks("--route", "on"), tasks("--route", "off"), tasks()
+    assert on and not off and not default
+    assert t_off.params_hash == t_default.params_hash != t_on.params_hash
+    assert "[route]" in t_on.params_toml and "[route]" not in t_off.params_toml
+    cfg = tmp_path / "run.toml"
+    cfg.write_text("[route]\nenabled = true\n")
+    assert tasks("--config", str(cfg))[1].params_hash == t_on.params_hash
+    assert not tasks("--config", str(cfg), "--route", "off")[0]
