@@ -328,6 +328,8 @@ class RouteLayer:
         t0 = time.perf_counter()
         p, g = self.params, self.grid
         x, y, th = (float(v) for v in pose)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
+            return                               # a faulty pose maps nothing (the filter brakes on it)
         lx, ly, lyaw = self.laser_mount
         c, s = math.cos(th), math.sin(th)
         sensor = np.array([x + c * lx - s * ly, y + s * lx + c * ly])
@@ -372,7 +374,8 @@ class RouteLayer:
 
     def local_goal(self, t: float, state: RobotState, goal) -> np.ndarray:
         """The goal handed to the method at time ``t`` [s]: the path's look-ahead point (module docstring, step 4),
-        replanning first when due. A goal other than the one of ``reset`` starts its own path."""
+        replanning first when due. A goal other than the one of ``reset`` starts its own path. A non-finite state
+        gets the goal itself (the planner's ``fail_safe`` answers it)."""
         if self.grid is None:
             raise RuntimeError("RouteLayer.local_goal before reset()")
         t0 = time.perf_counter()
@@ -380,6 +383,8 @@ class RouteLayer:
         if not np.array_equal(goal, self.goal):
             self.goal, self._dirty = goal.copy(), True
         pos = np.array([state.px, state.py])
+        if not np.isfinite(pos).all():           # a faulty state: the goal as it is (the planner's fail_safe acts)
+            return goal
         if self._dirty or t >= self._next_plan_t:
             self.plan(pos)
             self._next_plan_t = t + 1.0 / self.params.replan_hz

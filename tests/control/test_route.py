@@ -150,6 +150,14 @@ def test_a_walled_off_goal_hands_the_goal_itself():
     assert rl.path is None and rl.failed_plans == 1
 
 
+def test_a_faulty_pose_maps_nothing_and_gets_the_goal_itself():
+    rl = layer()
+    rl.scan(wall_scan(2.05, 1.0), (float("nan"), 0.0, 0.0))
+    assert not rl.grid.seen.any()
+    goal = np.array([4.0, 0.0])
+    assert np.array_equal(rl.local_goal(0.0, RobotState(float("nan"), 0.0, 0.0), goal), goal) and rl.plans == 0
+
+
 def test_grid_size_is_bounded_by_max_cells():
     g = OccupancyGrid((0.0, 0.0), (100.0, 100.0), 0.05, 10_000)
     assert g.nx * g.ny <= 10_000 and g.res > 0.9
