@@ -58,7 +58,7 @@ from .params.toml_io import from_dict, load_toml, parse_toml
 from .sim.scene import Box, Cylinder, FloorPatch, PedestrianBody, SceneSpec, Wall
 from .sim.truth import MIN_OBSTACLE_HEIGHT_M
 
-MAX_TIME_LIMIT_S = 600.0          # longest episode a scenario may ask for [s]
+from .limits import MAX_TIME_LIMIT_S, MIN_TIME_LIMIT_S   # noqa: E402 -- the episode's shortest and longest [s]
 WORLD_LIMIT_M = 1000.0            # every coordinate and size within +-this [m]
 MAX_HEIGHT_M = 100.0              # tallest obstacle [m]
 MAX_PEDESTRIANS = 200
@@ -205,7 +205,7 @@ class Scenario:
     """One scenario as drawn for one seed (the file's ranges resolved)."""
     name: str
     description: str
-    time_limit_s: float = ranged(REQUIRED, 0, MAX_TIME_LIMIT_S, lo_open=True)
+    time_limit_s: float = ranged(REQUIRED, MIN_TIME_LIMIT_S, MAX_TIME_LIMIT_S)
     robot: RobotSpec
     extent_m: float = ranged(6.0, 0, WORLD_LIMIT_M, lo_open=True)  # half-size of the area shown in videos (m)
     walls: tuple[WallSpec, ...] = ()
@@ -222,8 +222,9 @@ class Scenario:
     def __post_init__(self):
         check_name(self.name, "a scenario's")
         check_field_ranges(self)
-        if not 0 < self.time_limit_s <= MAX_TIME_LIMIT_S:
-            raise FieldError("time_limit_s", f"must be in (0, {MAX_TIME_LIMIT_S:g}] s, got {self.time_limit_s:g}")
+        if not MIN_TIME_LIMIT_S <= self.time_limit_s <= MAX_TIME_LIMIT_S:
+            raise FieldError("time_limit_s", f"must be in [{MIN_TIME_LIMIT_S:g}, {MAX_TIME_LIMIT_S:g}] s, got "
+                             f"{self.time_limit_s:g}")
         if not 0 < self.extent_m <= WORLD_LIMIT_M:
             raise FieldError("extent_m", f"must be in (0, {WORLD_LIMIT_M:g}] m, got {self.extent_m:g}")
         for what, items, cap in (("pedestrians", self.pedestrians, MAX_PEDESTRIANS),

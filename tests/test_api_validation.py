@@ -49,6 +49,7 @@ EPISODE_CASES = [
     ({"seed": MAX_SEED + 1}, "seed"), ({"seed": True}, "seed"), ({"seed": "3"}, "seed"),
     ({"time_limit_s": math.nan}, "time_limit_s"), ({"time_limit_s": math.inf}, "time_limit_s"),
     ({"time_limit_s": 1e9}, "time_limit_s"), ({"time_limit_s": 600.001}, "time_limit_s"),
+    ({"time_limit_s": 0.05}, "time_limit_s"), ({"time_limit_s": 1e-300}, "time_limit_s"),
     ({"time_limit_s": 0.0}, "time_limit_s"), ({"time_limit_s": -2.0}, "time_limit_s"),
     ({"time_limit_s": "3"}, "time_limit_s"), ({"time_limit_s": True}, "time_limit_s"),
     ({"perception": "radar"}, "perception"), ({"camera": "side"}, "camera"), ({"video": ""}, "video"),
@@ -71,7 +72,7 @@ def test_run_episode_takes_the_edges_of_the_ranges():
     res = bigcbf.run_episode(SCENE, "cbf-only", seed=np.int64(3), time_limit_s=1)        # an int is a number too
     assert res.time_s <= 1.0 + 1e-9
     sc = load_scenario(SCENE, 0)
-    assert validate.check_time_limit(600, sc) == 600.0 and validate.check_time_limit(np.float32(1e-3), sc) > 0
+    assert validate.check_time_limit(600, sc) == 600.0 and validate.check_time_limit(np.float32(0.1), sc) > 0
     assert validate.check_seed(MAX_SEED) == MAX_SEED and validate.check_seed(np.uint32(MAX_SEED)) == MAX_SEED
 
 

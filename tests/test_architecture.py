@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: the layers, lowest first: (name, module prefixes). A module belongs to the layer of its longest matching prefix.
 LAYERS = [
     ("foundation", ["bigcbf", "bigcbf.errors", "bigcbf.types", "bigcbf.registry", "bigcbf.outputs", "bigcbf.progress",
-                    "bigcbf.validate", "bigcbf.sanity", "bigcbf.cost"]),
+                    "bigcbf.validate", "bigcbf.sanity", "bigcbf.cost", "bigcbf.limits"]),
     ("params", ["bigcbf.params"]),
     ("robot side and log I/O", ["bigcbf.control", "bigcbf.perception", "bigcbf.logio"]),
     ("sim", ["bigcbf.sim", "bigcbf.assets", "bigcbf.robots"]),

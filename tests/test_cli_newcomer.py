@@ -93,7 +93,7 @@ def test_methods_lists_every_method_with_its_dataclass_defaults_and_units(capsys
 def test_methods_name_shows_one_in_full(capsys):
     assert main(["methods", "dwa"]) == 0
     out = capsys.readouterr().out
-    assert list(_blocks(out)) == ["dwa"] and "Dynamic-window sampling" in out and "[methods.dwa]" in out
+    assert list(_blocks(out)) == ["dwa"] and "DWA (Fox et al. 1997)" in out and "[methods.dwa]" in out
     # BIG-CBF's parameters are the stack's: every one, with the value a run uses by default
     from bigcbf.params.stack import default_stack_params
 
@@ -171,9 +171,10 @@ def test_time_limit_cuts_the_episode(capsys):
 
 
 @pytest.mark.parametrize("value, message", [
-    ("0", "argument --time-limit: expected a time limit in seconds in (0, 600], got 0"),
-    ("-3", "argument --time-limit: expected a time limit in seconds in (0, 600], got -3"),
-    ("601", "argument --time-limit: expected a time limit in seconds in (0, 600], got 601"),
+    ("0", "argument --time-limit: expected a time limit in seconds in [0.1, 600], got 0"),
+    ("0.05", "argument --time-limit: expected a time limit in seconds in [0.1, 600], got 0.05"),
+    ("-3", "argument --time-limit: expected a time limit in seconds in [0.1, 600], got -3"),
+    ("601", "argument --time-limit: expected a time limit in seconds in [0.1, 600], got 601"),
     ("inf", "argument --time-limit: expected a finite number, got 'inf'"),
     ("2s", "argument --time-limit: expected a number, got '2s'"),
 ])
@@ -225,7 +226,7 @@ def test_bad_robot_profiles_are_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text('latency_s = "slow"\n')
     for value, message in [
-        ("x3", "argument --robot-profile: no shipped robot profile 'x3' (shipped: x3_hardware, x3_sim)"),
+        ("x3", "argument --robot-profile: no shipped robot profile 'x3' (shipped: x3_hardware, x3_sim, "),
         ("nope.toml", "argument --robot-profile: nope.toml: file not found"),
         (str(tmp_path), "and not a .toml file"),
         (str(bad), f"{bad}: field 'latency_s': expected a number, got 'slow'"),

@@ -66,6 +66,16 @@ def float_in_closed(lo: float, hi: float, what: str = "a number"):
     return parse
 
 
+def float_in_range(lo: float, hi: float, what: str = "a number"):
+    """A finite number in [lo, hi]."""
+    def parse(s: str) -> float:
+        v = _float(s)
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected {what} in [{lo:g}, {hi:g}], got {v:g}")
+        return v
+    return parse
+
+
 def robot_profile_arg(s: str) -> Path:
     """A robot profile (the simulated robot's imperfections, ``bigcbf/params/robot.py``): the name of a shipped one
     (``x3_sim``, ``x3_hardware``: ``bigcbf/profiles/``) or a path to a .toml file. Returns the file; its contents

@@ -1,10 +1,8 @@
 """bigcbf run: one episode of a scenario with a method and a seed."""
 from __future__ import annotations
 
-from .argtypes import float_in_closed, nonneg_int, path_arg, positive_float, robot_profile_arg
-
-#: the longest episode --time-limit allows [s] (a scenario file's own cap, bigcbf/scenario.py)
-MAX_TIME_LIMIT_S = 600.0
+from ..limits import MAX_TIME_LIMIT_S, MIN_TIME_LIMIT_S         # --time-limit's range: a scenario file's own
+from .argtypes import float_in_range, nonneg_int, path_arg, positive_float, robot_profile_arg
 
 HELP = "run one episode (scenario name or .toml file, method, seed); print its metrics, optionally a video/log"
 
@@ -32,9 +30,9 @@ def add_arguments(p):
                    help="the route layer under the method (bigcbf/control/route.py: a map from the robot's own scans, "
                         "an A* path on it, its look-ahead point as the method's goal), as the configuration's [route] "
                         "enabled (default: the configuration's, off: the paper's set-up)")
-    p.add_argument("--time-limit", type=float_in_closed(0.0, MAX_TIME_LIMIT_S, "a time limit in seconds"),
+    p.add_argument("--time-limit", type=float_in_range(MIN_TIME_LIMIT_S, MAX_TIME_LIMIT_S, "a time limit in seconds"),
                    default=None, metavar="S",
-                   help=f"end the episode (a timeout) after S simulated seconds, 0 < S <= {MAX_TIME_LIMIT_S:g} "
+                   help=f"end the episode (a timeout) after S simulated seconds, {MIN_TIME_LIMIT_S:g} <= S <= {MAX_TIME_LIMIT_S:g} "
                         "(default: the scenario's time_limit_s)")
     p.add_argument("--perception", choices=["lidar", "truth"], default="lidar",
                    help="obstacles from the LiDAR pipeline (default) or, for debugging, from the simulator's truth")
