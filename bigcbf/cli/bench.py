@@ -10,6 +10,18 @@ HELP = ("run many episodes (methods x scenarios x seeds) into DIR/results.sqlite
 
 
 
+def _suites_help() -> str:
+    """Each registered suite with its description and default seed count (the registry is the one list)."""
+    from ..bench.suites import SUITES
+    return "; ".join(f"{n} ({SUITES.get(n).description}; {SUITES.get(n).default_seeds} seed"
+                     f"{'s' if SUITES.get(n).default_seeds != 1 else ''})" for n in SUITES.names())
+
+
+def _splits_help() -> str:
+    from ..bench.suites import SUITES
+    return "; ".join(f"{n}: {' or '.join(SUITES.get(n).splits)}" for n in SUITES.names() if SUITES.get(n).splits)
+
+
 def add_arguments(p):
     p.add_argument("--out", type=path_arg, required=True, metavar="DIR",
                    help="output directory: new, empty, or an earlier bench's (rerunning with the same DIR resumes); "
@@ -18,14 +30,11 @@ def add_arguments(p):
                    help="methods to compare: names from 'bigcbf methods' or package.module:Class (importable by "
                         "every worker; default: every registered method)")
     p.add_argument("--suite", default="paper", metavar="NAME",
-                   help="the scenarios of a named suite: paper (default; the nine of Table II, 50 seeds), hardware "
-                        "(the three lab scenes of Table III, 20 seeds, the physical preset), generated (procedural "
-                        "worlds) or faults (every fault, mild and severe, on shipped scenes, 5 seeds)")
+                   help="the scenarios of a named suite (default paper): " + _suites_help())
     p.add_argument("--scenarios", nargs="+", default=None, metavar="S",
                    help="scenario names or .toml files instead of the suite's")
     p.add_argument("--split", default=None, metavar="NAME",
-                   help="only the suite's scenarios of this split (generated: dev or test; faults: none, mild or "
-                        "severe; default: all)")
+                   help="only the suite's scenarios of this split (" + _splits_help() + "; default: all)")
     seeds = p.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", default=None, metavar="N",
                        help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper; at most "
