@@ -255,3 +255,13 @@ def test_bench_route_flag_is_part_of_the_key(trap, tmp_path):
     cfg.write_text("[route]\nenabled = true\n")
     assert tasks("--config", str(cfg))[1].params_hash == t_on.params_hash
     assert not tasks("--config", str(cfg), "--route", "off")[0]
+
+
+def test_perf_figures_of_the_route_layer():
+    from bigcbf.control.perf import _route
+    from bigcbf.params import SIMULATION
+    out = _route(True, SIMULATION)
+    for key in ("route_scan_p95_ms", "route_plan_p95_ms", "route_plan_median_ms", "route_goal_p95_ms",
+                "route_scan_median_ms", "route_tick_mean_ms"):
+        assert 0 < out[key] < 1e3, key
+    assert out["route_plan_median_ms"] > out["route_scan_median_ms"]     # a replan (inflation + A*) costs more
