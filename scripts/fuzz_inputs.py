@@ -1083,9 +1083,11 @@ def signature(cls: str, stderr: str, flags: list[str]) -> str:
 def classify(case: Case, folder: Path, rc: int | None, timed_out: bool, out: str, err: str,
              before: dict[str, str | None], guarded_before: dict) -> tuple[str, list[str]]:
     flags: dict[str, list[str]] = {c: [] for c in CLASSES}
+    argv = list(case.argv)
+    forced = {argv[i + 1] for i in range(len(argv) - 1) if argv[i] == "--out"} if "--force" in argv else set()
     for name, dig in before.items():
         now = _digest(folder / name)
-        if now != dig:
+        if now != dig and name not in forced:      # --force: the user asked to replace that file
             flags["data-loss"].append(f"input {name} {'removed' if now is None else 'changed'}")
     if _guarded_state() != guarded_before:
         flags["data-loss"].append("a shipped profile or scenario of the package changed")
