@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params.stack import StackParams
+from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
 from . import kernels
 from .jit import kernel
@@ -162,7 +162,8 @@ def _track(z, px, py, dx, dy):
 @kernel
 def _relevant(px, py, dx, dy, obs_z, obs_r, geo):
     """eq:behavior_subgoals (10): the locally relevant obstacle (module docstring): its index (-1 for none), s_i and
-    c_i (0 for none). The nearest in s_i wins, ties to the lower index. geo: see :class:`PolicyData`."""
+    c_i (0 for none). The nearest in s_i wins, ties to the lower index. geo: :func:`policy_geometry` (the look-ahead
+    geo[2] and the band geo[3] follow the rules' ``fixed_lookahead`` and ``in_way_band``)."""
     r_robot, d0, reach, band = geo[0], geo[1], geo[2], geo[3]
     j, s_j, c_j = -1, np.inf, 0.0
     for m in range(obs_r.shape[0]):
@@ -175,9 +176,12 @@ def _relevant(px, py, dx, dy, obs_z, obs_r, geo):
 
 @kernel
 def _pass_offset(sigma, px, py, dx, dy, j, obs_z, obs_r, groups, geo):
-    """eq:behavior_subgoals (10) lateral PASS offset max(d_pass, r_R + r_j + 0.35) [m] around relevant obstacle j,
+    """eq:behavior_subgoals (10) lateral PASS offset max(d_pass, r_R + r_j + 0.35) [m] around relevant obstacle j.
+    The paper's (rule ``pass_group_reach`` off, geo[6] = 0): d_pass = d_pass_min, a constant. With the rule:
     d_pass = max(d_pass_min, extent + r_R + 0.35), the extent being how far j's group reaches towards side sigma,
     max over m in G(j) of sigma c_m + r_m (module docstring)."""
+    if geo[6] == 0.0:
+        return max(geo[4], geo[0] + obs_r[j] + PASS_EXTRA_M)
     extent = -np.inf
     for m in range(obs_r.shape[0]):
         if groups[m] == groups[j]:
@@ -197,7 +201,7 @@ def _subgoal(kind, forward, lateral, sigma, px, py, ex, ey, dx, dy, obs_z, obs_r
         offset = 0.0
         if j >= 0:
             offset = _pass_offset(sigma, px, py, dx, dy, j, obs_z, obs_r, groups, geo)
-            if alone[j]:                 # beside a lone obstacle: forward max(0.85, s_i)
+            if geo[7] != 0.0 and alone[j]:   # rule pass_forward_beside, a lone obstacle: forward max(0.85, s_i)
                 forward = max(forward, s_j)
         lateral = sigma * offset
     return forward * dx + lateral * -dy, forward * dy + lateral * dx
@@ -275,15 +279,30 @@ def mode_rows(mode_idx, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
     return KIND[mode_idx], np.ascontiguousarray(coef)
 
 
-def policy_geometry(params: StackParams) -> np.ndarray:
-    """The geometry the compiled policy reads (6,): r_R, d0, relevant_range_m, in_way_margin_m, d_pass_min_m,
-    eps_g_m [m]."""
+def lookahead_m(params: StackParams, rules: PlusRules = PAPER_RULES) -> float:
+    """How far ahead the locally relevant obstacle is looked for [m] (its surface, s_i - r_i): the distance the
+    imagination's horizon covers at full speed, v_max N dt (paper silent; 1.2 m with Table I), or the rule
+    ``fixed_lookahead``'s ``relevant_range_m``."""
+    return rules.relevant_range_m if rules.fixed_lookahead else params.v_max_mps * params.N * params.dt_s
+
+
+def in_way_band_m(rules: PlusRules = PAPER_RULES) -> float:
+    """The band beyond r_R + r_i + d0 within which an obstacle is "in the way" of the goal line [m]: 0 (paper
+    silent: the clearance of eq:true_safety_requirement (6)), or the rule ``in_way_band``'s ``in_way_margin_m``."""
+    return rules.in_way_margin_m if rules.in_way_band else 0.0
+
+
+def policy_geometry(params: StackParams, rules: PlusRules = PAPER_RULES) -> np.ndarray:
+    """The geometry and switches the compiled policy reads (8,): r_R, d0, the look-ahead (:func:`lookahead_m`), the
+    in-the-way band (:func:`in_way_band_m`), d_pass_min_m, eps_g_m [m], and the rules ``pass_group_reach`` and
+    ``pass_forward_beside`` (1.0 on, 0.0 off)."""
     unc = params.uncertainty
-    return np.array([unc.r_robot_m, unc.d0_m, params.relevant_range_m, params.in_way_margin_m,
-                     params.d_pass_min_m, params.eps_g_m])
+    return np.array([unc.r_robot_m, unc.d0_m, lookahead_m(params, rules), in_way_band_m(rules),
+                     params.d_pass_min_m, params.eps_g_m, float(rules.pass_group_reach),
+                     float(rules.pass_forward_beside)])
 
 
-def relevant_obstacle(p, d_g, obs_p, obs_r, params: StackParams):
+def relevant_obstacle(p, d_g, obs_p, obs_r, params: StackParams, rules: PlusRules = PAPER_RULES):
     """The locally relevant obstacle of eq:behavior_subgoals (10) for each row (see the module docstring).
 
     p, d_g (B, 2) (d_g from :func:`goal_basis`); obs_p (M, 2); obs_r (M,). Returns (index (B,) with -1 for none,
@@ -292,19 +311,21 @@ def relevant_obstacle(p, d_g, obs_p, obs_r, params: StackParams):
     obs_r = np.asarray(obs_r, float).reshape(-1)
     j, c = np.empty(len(p), np.int64), np.empty(len(p))
     _relevant_rows(_planar(p), _planar(np.atleast_2d(d_g)), _planar(np.reshape(obs_p, (-1, 2))), obs_r,
-                   policy_geometry(params), j, c)
+                   policy_geometry(params, rules), j, c)
     return j, c, np.where(j >= 0, obs_r[np.maximum(j, 0)] if len(obs_r) else 0.0, 0.0)
 
 
-def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None) -> np.ndarray:
+def subgoal_error(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None,
+                  rules: PlusRules = PAPER_RULES) -> np.ndarray:
     """eq:behavior_subgoals (10): e_b = g_b - p (B, 2) for each row's mode:
-    GOAL p_g - p; PASS-sigma max(0.85, s_i) d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a
-    relevant obstacle or when it is part of a group; s_i its along-track distance, see the module docstring);
+    GOAL p_g - p; PASS-sigma 0.85 d_g + sigma max(d_pass, r_R + r_i + 0.35) n_g (0.85 d_g without a relevant
+    obstacle; with the rule ``pass_forward_beside`` max(0.85, s_i) d_g beside a lone obstacle, s_i its along-track
+    distance, and with ``pass_group_reach`` d_pass from the group's reach, see the module docstring);
     SIDE-sigma 0.45 d_g + 0.80 sigma n_g;
     YIELD 0. (REVERSE rows get 0; their velocity comes from :func:`release_velocity`.)
     ``groups``: labels from :func:`obstacle_groups` (computed here when not given)."""
     p = np.atleast_2d(np.asarray(p, float))
-    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups)
+    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups, rules=rules)
     out = np.empty((len(p), 2))
     _subgoal_rows(data.kind, data.coef, _planar(p), data.goal, _planar(np.reshape(obs_p, (-1, 2))), data.obs_r,
                   data.groups, data.alone, data.geometry, out)
@@ -390,25 +411,29 @@ class PolicyData:
     obs_vz: np.ndarray | None        # (M,) complex velocities [m/s] (the push), or None
     release: np.ndarray              # (B,) complex chosen REVERSE velocities [m/s] (0 where none or ``push``)
     push: bool                       # REVERSE rows without a chosen velocity: the push, at each evaluation
-    geometry: np.ndarray             # (6,) :func:`policy_geometry`
+    geometry: np.ndarray             # (8,) :func:`policy_geometry`
     params: StackParams
 
     @classmethod
     def build(cls, mode_idx, goal, obs_p, obs_r, params: StackParams, *, groups=None, obs_v=None,
-              release=None, rows=None) -> "PolicyData":
+              release=None, rows=None, rules: PlusRules = PAPER_RULES) -> "PolicyData":
         """``mode_idx`` (B,); obstacles at the start obs_p (M, 2), obs_r (M,), obs_v (M, 2) or None; ``groups``
-        (computed from obs_p when a PASS row needs them); ``release``: a complex REVERSE velocity, one for all rows
-        or one per row (None: the push); ``rows``: :func:`mode_rows` of ``mode_idx`` when already at hand."""
+        (computed from obs_p when a PASS row needs them: the rules ``pass_group_reach`` or ``pass_forward_beside``);
+        ``release``: a complex REVERSE velocity, one for all rows or one per row (None: the push, which reads obs_v
+        only with the rule ``release_sideways``); ``rows``: :func:`mode_rows` of ``mode_idx`` when already at hand;
+        ``rules``: our rules beyond the paper (:class:`~bigcbf.params.stack.PlusRules`; default every one off)."""
         kind, coef = mode_rows(mode_idx, params) if rows is None else rows
         obs_r = np.ascontiguousarray(obs_r, dtype=float).reshape(-1)
         if groups is None:
-            groups = (obstacle_groups(obs_p, obs_r, params) if len(obs_r) and np.any(kind == PASS_KIND)
+            grouped = rules.pass_group_reach or rules.pass_forward_beside
+            groups = (obstacle_groups(obs_p, obs_r, params) if grouped and len(obs_r) and np.any(kind == PASS_KIND)
                       else np.zeros(len(obs_r), int))
         groups = np.ascontiguousarray(groups, dtype=np.int64)
         push = release is None and bool(np.any(kind == REVERSE_KIND))
         release = np.array(np.broadcast_to(np.asarray(0j if release is None else release, complex), kind.shape))
         return cls(kind, coef, complex(*np.asarray(goal, float).reshape(2)), obs_r, groups, alone_in_group(groups),
-                   None if obs_v is None else _planar(obs_v), release, push, policy_geometry(params), params)
+                   None if obs_v is None or not rules.release_sideways else _planar(obs_v), release, push,
+                   policy_geometry(params, rules), params)
 
     def velocity(self, pz, obs_z) -> np.ndarray:
         """pi_b of every row as world-frame velocities (B,) complex [m/s] (eq:goal_basis (9), eq:behavior_subgoals
@@ -425,14 +450,15 @@ class PolicyData:
 
 
 def policy_velocity(mode_idx, p, goal, obs_p, obs_r, params: StackParams, groups=None, obs_v=None,
-                    release_v=None) -> np.ndarray:
+                    release_v=None, rules: PlusRules = PAPER_RULES) -> np.ndarray:
     """The behavior policies pi_b as world-frame translational velocities (B, 2) [m/s] (eq:goal_basis (9),
     eq:behavior_subgoals (10), eq:behavior_feedback (11)), zero inside the goal region; REVERSE rows use the
     fallback: ``release_v`` (2,) when given, else the push. (:meth:`PolicyData.velocity` on real arrays.)"""
     p = np.atleast_2d(np.asarray(p, float))
     obs_p = np.reshape(np.asarray(obs_p, float), (-1, 2))
     release = None if release_v is None else complex(*np.asarray(release_v, float).reshape(2))
-    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups, obs_v=obs_v, release=release)
+    data = PolicyData.build(mode_idx, goal, obs_p, obs_r, params, groups=groups, obs_v=obs_v, release=release,
+                            rules=rules)
     v = data.velocity(_planar(p), _planar(obs_p))
     return np.stack([v.real, v.imag], -1)
 
@@ -443,13 +469,14 @@ def body_command(theta, v_world) -> np.ndarray:
 
 
 def behavior_command(mode: str, state: RobotState, obstacles: Obstacles, goal, params: StackParams,
-                     groups=None, release_v=None) -> np.ndarray:
+                     groups=None, release_v=None, rules: PlusRules = PAPER_RULES) -> np.ndarray:
     """eq:online_behavior_command: u_in = pi_b(x(t), O(t), p_g), the selected policy regenerated from the latest
     estimates (3,).
     ``groups``: obstacle group labels (:func:`obstacle_groups`), computed from ``obstacles`` when not given;
-    ``release_v``: the REVERSE fallback's chosen world velocity (2,) (the push when None)."""
+    ``release_v``: the REVERSE fallback's chosen world velocity (2,) (the push when None); ``rules``: our rules
+    beyond the paper (default every one off: the paper's policies)."""
     if mode not in MODE_INDEX:
         raise ValueError(f"unknown behavior mode {mode!r}; known: {', '.join(MODES)}")
     v = policy_velocity(np.array([MODE_INDEX[mode]]), state.p[None], goal, obstacles.p, obstacles.r, params, groups,
-                        obstacles.v, release_v)
+                        obstacles.v, release_v, rules)
     return body_command(np.array([state.theta]), v)[0]

@@ -1,17 +1,20 @@
 """The BIG-CBF planner (and its NoShared ablation): behavior selection every T_B, the selected feedback policy
 regenerated at every control tick (eq:online_behavior_command (8)). Its u_in goes to the common CbfFilter.
 
+Three methods, one implementation: ``big-cbf`` is the paper as written (every rule of ours off,
+:data:`~bigcbf.params.stack.PAPER_RULES`), ``big-cbf-noshared`` the same with the imagination's fixed 0.30 m margin
+and nothing else different, and ``big-cbf-plus`` (:class:`BigCbfPlusPlanner`) BIG-CBF with our rules beyond the
+paper, each a named switch of :class:`~bigcbf.params.stack.PlusRules` (``[methods.big-cbf-plus]``).
+
 What a selection keeps: the mode, and when the mode is the REVERSE fallback, the release velocity the
 imagination chose for it (:func:`~bigcbf.control.imagination.choose_release`); no imagined trajectory or command
 is replayed."""
 from __future__ import annotations
 
 import time
-from dataclasses import replace
-
 import numpy as np
 
-from ..params.stack import StackParams
+from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
 from .governor import GOVERNED_MODES, govern_command
@@ -31,29 +34,28 @@ class BigCbfPlanner:
     imagination-layer uncertainty construction in [eq:uncertainty_margin (21)] with a fixed 0.30-m geometric margin".
     Checked against this code: the two variants share the behaviors and policies (``behaviors``), N and dt, the
     scoring (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)) and the selector (dwell,
-    switching threshold, side commitment), the reverse-release fallback and the rollouts' execution model (A, d of
+    switching threshold), the reverse-release fallback and the rollouts' execution model (A, d of
     eq:execution (1), which propagates the imagined robot in both), and
     the common CbfFilter with the full shared D_i^exec. The one difference is in ``imagine`` (and the fallback's
-    release choice, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
-    of r_R + r_i + d0 + kappa_img m_i, and, following from it, the band within which an obstacle counts as "in the
-    way" of the straight line to the goal (``behaviors``: ``in_way_margin_m``, about BIG-CBF's static kappa_img m_i,
-    is ``noshared_margin_m`` for NoShared: with BIG-CBF's 0.15 m band and its own 0.30 m barrier, NoShared's PASS
-    ignored the obstacles its barrier rejected GOAL for, and it timed out in 49 of 50 double squeezes where it had
-    timed out in 22). kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
+    release rollout, which uses the same barrier): D_i^img = r_R + r_i + d0 + ``noshared_margin_m`` (0.30 m) instead
+    of r_R + r_i + d0 + kappa_img m_i (tests/control/test_paper_fidelity.py: with equal margins the two select the
+    same behaviors). kappa_img does not scale the fixed margin: kappa_img is the layer scaling of
     the shared m_i, which NoShared does not use ("a fixed 0.30 m margin", also with the hardware preset's
-    kappa_img = 0.8).
+    kappa_img = 0.8). (Before issue 24 NoShared also widened the "in the way" band of PASS to its margin; that band
+    is now a rule of ``big-cbf-plus``, which has no NoShared variant.)
 
     The first call selects; later selections happen on the grid t_0 + n T_B (with a tolerance for float
     clocks). ``last_imagination`` and ``last_selection`` keep the latest cycle for inspection.
     """
 
-    def __init__(self, params: StackParams, *, shared: bool = True):
-        if not shared:      # the band that makes an obstacle "in the way" (behaviors) is the imagination's margin
-            params = replace(params, in_way_margin_m=params.noshared_margin_m)
+    def __init__(self, params: StackParams, *, shared: bool = True, rules: PlusRules = PAPER_RULES):
+        if not isinstance(rules, PlusRules):
+            raise TypeError(f"rules must be PlusRules, got {type(rules).__name__}")
         self.params = params
         self.shared = shared
+        self.rules = rules
         self.name = "big-cbf" if shared else "big-cbf-noshared"
-        self.selector = BehaviorSelector(params)
+        self.selector = BehaviorSelector(params, rules)
         self.reset(0)
 
     def reset(self, seed: int) -> None:
@@ -73,10 +75,11 @@ class BigCbfPlanner:
         """One behavior-selection cycle (eq:behavior_rollout (12), eq:behavior_terms (13), eq:behavior_cost (14),
         eq:behavior_acceptance (22), eq:analytic_workload (24)): imagine, score, select; keeps only the mode."""
         p = self.params
-        img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode)
+        img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode, rules=self.rules)
         sel = self.selector.select(t, img)
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
-            self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared)
+            self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared,
+                                                        rules=self.rules)
             self._path = rel.p[best]
             self._margins = rel.margin[best].ravel()
         else:
@@ -98,9 +101,21 @@ class BigCbfPlanner:
                 nxt += self.params.T_B_s
             self._next_t = nxt
         mode = self.selector.mode
-        u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v),
-                         self.params)                                   # eq:online_behavior_command (8)
-        if mode in GOVERNED_MODES:
+        u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v,
+                                          rules=self.rules), self.params)  # eq:online_behavior_command (8)
+        if self.rules.speed_governor and mode in GOVERNED_MODES:
             u = govern_command(state, obstacles, u, self.params)[0]                           # governor.py
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,
                            margins_img=self._margins if planned else None)
+
+
+class BigCbfPlusPlanner(BigCbfPlanner):
+    """``big-cbf-plus``: BIG-CBF with our rules beyond the paper, each a named switch of its parameters
+    (:class:`~bigcbf.params.stack.PlusRules`, ``[methods.big-cbf-plus]`` of a run configuration; default: BIG-CBF as
+    it was before issue 24, every switch on but the speed governor). The shared imagination margin, as BIG-CBF."""
+
+    params_type = PlusRules
+
+    def __init__(self, params: StackParams, rules: PlusRules | None = None):
+        super().__init__(params, shared=True, rules=PlusRules() if rules is None else rules)
+        self.name = "big-cbf-plus"

@@ -59,8 +59,8 @@ the predicted obstacles O^k of eq:obs_prop (2) and eq:cov_prop (3)) and at every
 (eq:online_behavior_command (8)). BIG-CBF-NoShared shares the policies, so it shares the governor (its ablation stays in
 the imagination's margin). CBF-only and the baselines are untouched: their commands are their own. It uses every
 obstacle the policy sees (all tracks and wall points), a superset of the filter's rows (``cbf.select_constraints``), so
-it is never less conservative than the filter. It is an option, off by default: ``StackParams.speed_governor = true``
-(``[stack]`` of a run configuration) switches it on together with the selection's viability test and the release outlook
+it is never less conservative than the filter. It is a rule of ours, off by default: ``speed_governor = true`` in
+``[methods.big-cbf-plus]`` of a run configuration (``PlusRules``; ``big-cbf``, the paper's, never governs) switches it on together with the selection's viability test and the release outlook
 (docs/fidelity.md, "Liveness"), which it needs; on the nine paper scenes it is worse than the paper's reading (measured
 there). No QP solver is called: 11 scales, each with a closed-form 2-D projection, for all candidates and steps at once.
 """
@@ -177,9 +177,10 @@ def obstacle_sigma_term(cov, params: StackParams) -> np.ndarray:
 
 def govern_command(state: RobotState, obstacles: Obstacles, u, params: StackParams) -> tuple[np.ndarray, float]:
     """The governed body command s* u (3,) and s* for one robot state (module docstring). ``u`` (3,) is a behavior's
-    body twist from eq:behavior_feedback (11); its yaw rate is scaled with it (the behaviors command none)."""
+    body twist from eq:behavior_feedback (11); its yaw rate is scaled with it (the behaviors command none). The
+    caller applies it only with the rule ``speed_governor`` (``big-cbf-plus``)."""
     u = np.asarray(u, float).reshape(3)
-    if len(obstacles) == 0 or not params.speed_governor:
+    if len(obstacles) == 0:
         return u, 1.0
     op = obstacles.p[:, 0] + 1j * obstacles.p[:, 1]
     ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]

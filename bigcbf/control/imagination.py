@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params.stack import StackParams
+from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import BEHAVIORS, REVERSE, PolicyData, goal_basis, mode_indices, mode_rows, release_velocity
 from .faults import perception_fault
@@ -80,7 +80,8 @@ class Imagination:
         (:attr:`along`) is at least what the freeze speed would give over the horizon, v_freeze N dt, unless it reaches
         the goal region. Progress along the maneuver keeps a sidestep in front of a wide obstacle viable: sliding along
         it barely shortens the goal distance within the horizon (docs/fidelity.md, "Liveness"). YIELD stands still by
-        design. Only with ``StackParams.speed_governor``; without it: accepted."""
+        design. Only with the rule ``speed_governor`` (:class:`~bigcbf.params.stack.PlusRules`); without it:
+        accepted."""
         if self.params_stall is None:
             return np.asarray(self.accepted)
         p_stall, goal_reached = self.params_stall
@@ -114,7 +115,7 @@ _CONSTANTS: dict[tuple, tuple[StackParams, _Constants]] = {}
 
 
 def _constants(modes: tuple[str, ...], params: StackParams) -> _Constants:
-    key = (tuple(modes), id(params))
+    key = (tuple(modes), id(params))     # (the rules do not enter the constants)
     hit = _CONSTANTS.get(key)
     if hit is None or hit[0] is not params:
         if len(_CONSTANTS) > 64:
@@ -156,13 +157,15 @@ class _Governed:
 
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
-             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> _Rollout:
+             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
+             rules: PlusRules = PAPER_RULES) -> _Rollout:
     """eq:behavior_rollout (12): the closed-loop rollouts of ``modes``: the policy pi_b regenerated at every step
     from the imagined state and the predicted obstacles O^k (:meth:`behaviors.PolicyData.velocity`, the same
     compiled policy the execution loop calls), the robot propagated with the nominal eq:execution (1), the obstacles
     with eq:obs_prop (2) and eq:cov_prop (3). Planar vectors are complex numbers (x + i y; R(theta) is
     multiplication by e^{i theta}); all behaviors advance together. ``release_v`` (B,) complex: the constant world
-    velocity of each REVERSE row (default: the push)."""
+    velocity of each REVERSE row (default: the push). ``rules``: our rules beyond the paper (the policy's PASS rules,
+    ``speed_governor``)."""
     N, dt = params.N, params.dt_s
     K = _constants(modes, params)
     B, M = K.B, len(obstacles)
@@ -172,10 +175,10 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
         P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, params.uncertainty))
         Oc = Ok = P_obs[..., 0] + 1j * P_obs[..., 1]                  # (N+1, M)
-        if params.speed_governor and K.governed.any():
+        if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)
     policy = PolicyData.build(K.midx, goal, obstacles.p, obstacles.r, params, obs_v=obstacles.v, release=release_v,
-                              rows=K.rows)      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
+                              rows=K.rows, rules=rules)      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
     p, th = ((np.full(B, complex(state.px, state.py)), np.full(B, float(state.theta))) if start is None
              else (np.array(start[0], complex), np.array(start[1], float)))   # one start state per row
     rot = np.exp(1j * th)
@@ -185,7 +188,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                        np.empty((N + 1, B)))
     THk[:] = th
     # progress along the maneuver: only the liveness option's viability test reads it (Imagination.along)
-    along = np.zeros(B) if params.speed_governor else None
+    along = np.zeros(B) if rules.speed_governor else None
     for k in range(N):
         Pk[k] = p
         v = policy.velocity(p, Ok[k])
@@ -224,11 +227,16 @@ def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackPa
 RELEASE_HEADINGS = np.deg2rad([0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0])
 
 
-def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: StackParams) -> np.ndarray:
-    """The fallback's predefined fan (B,) of world velocities as complex numbers: the push
-    (:func:`behaviors.release_velocity`), the eight ``RELEASE_HEADINGS`` around straight back from the goal at
-    ``v_release_mps``, and 0 (standing still)."""
-    push = release_velocity(state.p[None], goal, obstacles.p, obstacles.r, params, obstacles.v)[0]
+def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
+                       rules: PlusRules = PAPER_RULES) -> np.ndarray:
+    """The fallback's candidates (B,) of world velocities as complex numbers: the push
+    (:func:`behaviors.release_velocity`; from moving obstacles sideways with the rule ``release_sideways``) alone
+    (the paper's "predefined reverse-release fallback", one choice); with the rule ``release_fan`` also the eight
+    ``RELEASE_HEADINGS`` around straight back from the goal at ``v_release_mps``, and 0 (standing still)."""
+    push = release_velocity(state.p[None], goal, obstacles.p, obstacles.r, params,
+                            obstacles.v if rules.release_sideways else None)[0]
+    if not rules.release_fan:
+        return np.array([complex(push[0], push[1])])
     d_g, _, _ = goal_basis(state.p, goal)
     back = -complex(d_g[0], d_g[1]) if np.any(d_g) else complex(-math.cos(state.theta), -math.sin(state.theta))
     fan = params.v_release_mps * back * np.exp(1j * RELEASE_HEADINGS)
@@ -236,7 +244,7 @@ def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: St
 
 
 def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
-                   shared: bool = True) -> tuple[np.ndarray, Imagination, int]:
+                   shared: bool = True, rules: PlusRules = PAPER_RULES) -> tuple[np.ndarray, Imagination, int]:
     """The reverse-release fallback's velocity (2,) [m/s, odom], chosen from :func:`release_candidates` by what it
     makes possible: each candidate's rollout (eq:behavior_rollout (12), the same prediction and shared barrier as
     the behaviors, eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) is followed for
@@ -248,11 +256,14 @@ def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackP
     making a maneuver possible again rather than merely backing off. When no candidate leads to a viable behavior,
     the one with the least accumulated barrier deficit sum_{k=1..N} max(0, -min_i h_{i,k}^img) (it leaves the
     inflated radii soonest and enters none on the way); ties go to the first in the fan's order, the push. The
-    outlook is part of the liveness option (``StackParams.speed_governor``); without it, the least deficit alone.
-    Also returns the candidates' imagination; the chosen row is ``index``."""
-    cand = release_candidates(state, obstacles, goal, params)
-    img = imagine(state, obstacles, goal, params, modes=(REVERSE,) * len(cand), shared=shared, release_v=cand)
-    j_after = release_outlook(img, obstacles, goal, params, shared=shared) if params.speed_governor else None
+    outlook is part of the liveness option (the rule ``speed_governor``); without it, the least deficit alone.
+    Without the rule ``release_fan`` (the paper's reading) there is one candidate, the push. Also returns the
+    candidates' imagination; the chosen row is ``index``."""
+    cand = release_candidates(state, obstacles, goal, params, rules)
+    img = imagine(state, obstacles, goal, params, modes=(REVERSE,) * len(cand), shared=shared, release_v=cand,
+                  rules=rules)
+    j_after = (release_outlook(img, obstacles, goal, params, shared=shared, rules=rules) if rules.speed_governor
+               else None)
     if j_after is not None and np.isfinite(j_after).any():
         best = int(np.argmin(j_after))
     else:
@@ -261,7 +272,7 @@ def choose_release(state: RobotState, obstacles: Obstacles, goal, params: StackP
 
 
 def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackParams, *,
-                    shared: bool = True) -> np.ndarray:
+                    shared: bool = True, rules: PlusRules = PAPER_RULES) -> np.ndarray:
     """For each release rollout of ``rel``: the lowest J (eq:behavior_cost (14)) of a viable behavior imagined from the
     state the release reaches after T_B (+inf when none is viable), see :func:`choose_release`."""
     R = len(rel.modes)
@@ -276,7 +287,7 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
     p0 = np.repeat(rel.p[:, kB, 0] + 1j * rel.p[:, kB, 1], nb)
     th0 = np.repeat(rel.theta[:, kB], nb)
     img = imagine(RobotState(0.0, 0.0, 0.0), ahead, goal, params, modes=BEHAVIORS * R, shared=shared,
-                  start=(p0, th0))
+                  start=(p0, th0), rules=rules)
     J = np.where(img.viable, img.J, np.inf).reshape(R, nb)
     return J.min(axis=1)
 
@@ -324,12 +335,14 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
 
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
-            release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None) -> Imagination:
+            release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
+            rules: PlusRules = PAPER_RULES) -> Imagination:
     """eq:behavior_rollout (12) rollouts of ``modes`` from ``state`` and their scores (eq:behavior_terms (13),
     eq:behavior_cost (14), eq:behavior_acceptance (22), eq:analytic_workload (24)).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
     ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0). ``release_v``: see :func:`_rollout`.
+    ``rules``: our rules beyond the paper (:class:`~bigcbf.params.stack.PlusRules`; default every one off).
 
     The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
     shot over (behaviors, steps, obstacles).
@@ -344,7 +357,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     goal = np.asarray(goal, float)
     pg = complex(goal[0], goal[1])
     ro = _rollout(state, obstacles, goal, params, tuple(modes),
-                  None if release_v is None else np.asarray(release_v, complex), start)
+                  None if release_v is None else np.asarray(release_v, complex), start, rules)
     Pc, Uc, TH = ro.P, ro.U, ro.TH
     U = np.zeros((ro.K.B, N, 3))
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
@@ -364,6 +377,6 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
     stall = ((params.v_freeze_mps * N * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, N]), params.eps_g_m))
-             if params.speed_governor else None)
+             if rules.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
                        stall, ro.along)

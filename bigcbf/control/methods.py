@@ -28,7 +28,7 @@ from ..params.stack import StackParams
 from ..registry import Registry, check_protocol_factory
 from ..types import Obstacles, RobotState
 from .behaviors import behavior_command
-from .big_cbf import BigCbfPlanner
+from .big_cbf import BigCbfPlanner, BigCbfPlusPlanner
 from .planner import PlanInfo, Planner, clip_command, fail_safe
 
 METHODS: Registry[Callable[[StackParams], Planner]] = Registry("method")
@@ -75,6 +75,7 @@ def filter_params(planner, params: StackParams) -> StackParams:
 
 METHODS.register("big-cbf", lambda params: BigCbfPlanner(params, shared=True))
 METHODS.register("big-cbf-noshared", lambda params: BigCbfPlanner(params, shared=False))
+METHODS.register("big-cbf-plus", BigCbfPlusPlanner)      # our rules beyond the paper, each a switch (PlusRules)
 METHODS.register("cbf-only", CbfOnlyPlanner)
 METHODS.register("dpcbf", DpcbfPlanner)
 

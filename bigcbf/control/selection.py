@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params.stack import StackParams
+from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from .behaviors import MODE_INDEX, REVERSE, SIGMA
 from .imagination import Imagination
 
@@ -31,7 +31,13 @@ class BehaviorSelector:
     J already contains w_sw C_sw (eq:behavior_cost (14)). Ties go to the first mode in the behavior order
     (deterministic).
 
-    Side commitment (the switching threshold applied to the side): once a left or right mode (PASS/SIDE-L or -R)
+    Rules 3 and 4 are the paper's "minimum dwell time and a relative switching-improvement threshold" (values paper
+    silent: ``StackParams.dwell_s``, ``switch_rel``, ``switch_abs``); rule 1 its fallback; rule 2 (a rejected
+    retained mode is replaced at once, the dwell notwithstanding) is paper silent: a rejected candidate cannot be
+    kept.
+
+    Side commitment (a rule of ours, ``PlusRules.side_commitment``, off in ``big-cbf``; the switching threshold
+    applied to the side): once a left or right mode (PASS/SIDE-L or -R)
     has been selected, "the best" in rules 2 and 4 is taken among the accepted modes on that side or on none
     (GOAL, YIELD), and an opposite-side mode replaces it only if it beats it by the switching threshold plus w_sw
     (a side flip undoes a manoeuvre: it is charged as a second switch). The side is released when GOAL is
@@ -47,10 +53,12 @@ class BehaviorSelector:
     does not end in the goal region, can no more proceed than a rejected one, so it is treated as one
     (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and when no candidate is left the
     reverse-release fallback is invoked, as when all are rejected. YIELD is exempt (standing still is what it does). Rules 1-4 read "viable" for "accepted".
+    This is part of the rule ``PlusRules.speed_governor``; without it "viable" is "accepted".
     """
 
-    def __init__(self, params: StackParams):
+    def __init__(self, params: StackParams, rules: PlusRules = PAPER_RULES):
         self.params = params
+        self.rules = rules
         self.reset()
 
     def reset(self) -> None:
@@ -62,7 +70,7 @@ class BehaviorSelector:
         """The lowest-J accepted mode, honouring the side commitment (class docstring)."""
         p = self.params
         best = int(np.argmin(J))
-        if self.side == 0:
+        if self.side == 0 or not self.rules.side_commitment:
             return img.modes[best]
         side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
         own = np.where(side != -self.side, J, np.inf)

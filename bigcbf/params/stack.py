@@ -37,7 +37,7 @@ from .checks import check_field_ranges, ranged
 from .robot import IDENTITY3, Mat3, Vec3
 from .toml_io import from_dict, load_toml, save, to_dict
 
-__all__ = ["ExecutionModel", "Tau95Parts", "UncertaintyParams", "StackParams", "SIMULATION", "PHYSICAL",
+__all__ = ["ExecutionModel", "Tau95Parts", "UncertaintyParams", "StackParams", "PlusRules", "PAPER_RULES", "SIMULATION", "PHYSICAL",
            "load_stack_params", "save_stack_params", "default_stack_params", "stack_profile_path", "read_provenance"]
 
 
@@ -172,16 +172,15 @@ class StackParams:
       h = |q|^2 - D^2, the constraint allows an approach speed of alpha (|q|^2 - D^2) / (2 |q|); 1.5 1/s lets the robot
       close in at ~0.4 m/s when 0.3 m outside a 0.5 m inflated radius and brakes smoothly to zero at the boundary;
       alpha * T_C = 0.075 << 1 keeps the sampled filter close to its continuous-time design.
-    - ``d_pass_min_m``, ``in_way_margin_m`` and ``relevant_range_m``: the locally relevant obstacle and d_pass of
-      eq:behavior_subgoals (10), see ``bigcbf.control.behaviors``. ``in_way_margin_m`` (0.15 m, about the imagination's
-      margin kappa_img m_i of a static obstacle at cruise speed, 0.135 m with x3_sim) makes an obstacle "in the way"
-      when the straight line to the goal brings the footprint closer than d0 + that margin to it, the scale of the
-      barrier test of eq:behavior_acceptance (22) (BIG-CBF-NoShared uses its own imagination margin,
-      ``noshared_margin_m``, instead); it was d_pass_min (0.30 m) before, which made both posts beside a 1 m gap "in the
-      way" of a robot centred in it (docs/fidelity.md, "Behavior imagination and selection").
-    - ``dwell_s``, ``switch_rel``, ``switch_abs``: a regular behavior is kept at least ``dwell_s`` after a switch
-      (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| - switch_abs.
-    - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior viable):
+    - ``d_pass_min_m``: d_pass of eq:behavior_subgoals (10), "the minimum lateral passing offset", a constant
+      (paper silent on its value): 0.30 m. The paper's max(d_pass, r_R + r_i + 0.35) then never takes it
+      (r_R + 0.35 = 0.50 m > 0.30 m): PASS passes at r_R + r_i + 0.35 from the goal line. The locally relevant
+      obstacle is defined in ``bigcbf.control.behaviors`` (paper silent; look-ahead v_max N dt, no band).
+    - ``dwell_s``, ``switch_rel``, ``switch_abs``: the paper's "minimum dwell time and a relative
+      switching-improvement threshold" (values paper silent): a regular behavior is kept at least ``dwell_s`` after a
+      switch (unless it is rejected) and is replaced only by a candidate with J < J_cur - switch_rel |J_cur| -
+      switch_abs (the absolute part keeps the rule meaningful when J_cur is near 0).
+    - ``v_release_mps``, ``release_range_m``: the reverse-release fallback (no regular behavior accepted):
       move away from obstacles closer than r_R + r_i + d0 + release_range_m, else straight back from the goal.
     - ``u_min``/``u_max``: actuator box of the QP (eq:hard_cbf_qp (26)); must contain 0 (the braking fallback).
     - ``H_diag``, ``R_u_diag``: diagonal weights of eq:hard_cbf_qp (26) and of E_CBF (eq:sim_cbf_energy (27));
@@ -191,13 +190,9 @@ class StackParams:
       each of ``wall_sectors`` equal bearing sectors around the robot, so walls on both sides of a corridor are
       always represented. The imagination uses the same selection (from the initial state).
     - ``w_eps``: the regularizer epsilon of eq:analytic_workload (24), in the units of |grad_u gamma|^2 [m^2].
-    - ``speed_governor``: BIG-CBF's GOAL/PASS/SIDE commands (eq:behavior_feedback (11)) are scaled to the speed
-      that makes the most progress after a 2-D model of the common CBF (rows of eq:cbf_condition (25), D_i at that
-      command), at every control tick
-      and in every rollout step (``bigcbf.control.governor``), with the viability test of the selection and the
-      release chosen by what it makes possible (docs/fidelity.md, liveness); false (default):
-      eq:behavior_feedback (11) at the nominal limits v_b^max, selection on eq:behavior_acceptance (22) alone, release
-      by least barrier deficit.
+    - Our rules beyond the paper (the PASS rules, the side commitment, the release fan, the speed governor) are
+      not here: they are :class:`PlusRules`, the parameters of the method ``big-cbf-plus`` (``[methods.big-cbf-plus]``
+      of a run configuration); ``big-cbf`` and ``big-cbf-noshared`` run the paper's rules (docs/fidelity.md).
     - ``cbf_velocity_rows`` (default false: the paper's filter), ``cbf_velocity_horizon_s``,
       ``cbf_velocity_min_speed_mps``: the velocity-aware barrier of the common filter (issue 23), one collision-cone
       row (C3BF's set with the shared D_i^exec as radius, truncated at the horizon tau) per tracked obstacle moving
@@ -228,8 +223,6 @@ class StackParams:
     v_release_mps: float = ranged(0.3, 0, 5, lo_open=True)  # reverse-release fallback speed [m/s]
     release_range_m: float = ranged(0.5, 0, 10)  # obstacles within D0_i + this push the fallback [m]
     d_pass_min_m: float = ranged(0.30, 0, 10)  # minimum lateral passing offset [m]
-    in_way_margin_m: float = ranged(0.15, 0, 10)  # an obstacle is in the way within r_R + r_i + d0 + this of the goal line [m]
-    relevant_range_m: float = ranged(3.0, 0, 100)  # look-ahead for the locally relevant obstacle [m]
     u_min: Vec3 = ranged((-0.8, -0.8, -1.0), -10, 0)  # actuator box, lower (m/s, m/s, rad/s)
     u_max: Vec3 = ranged((0.8, 0.8, 1.0), 0, 10)  # actuator box, upper (m/s, m/s, rad/s)
     H_diag: Vec3 = ranged((1.0, 1.0, 1.0), 0, 1000000.0, lo_open=True)  # H of eq:hard_cbf_qp (26) (diagonal)
@@ -240,7 +233,6 @@ class StackParams:
     noshared_margin_m: float = ranged(0.30, 0, 10)  # BIG-CBF-NoShared imagination margin [m]
     max_obstacle_constraints: int = ranged(12, 0, 1000)  # tracked obstacles in the CBF at most [-]
     wall_sectors: int = ranged(8, 0, 360)  # bearing sectors for wall-point constraints [-]
-    speed_governor: bool = False        # opt-in: BIG-CBF's policies move at the speed the CBF admits (governor.py)
     cbf_velocity_rows: bool = False     # opt-in: a collision-cone row per moving obstacle in the common filter
     cbf_velocity_horizon_s: float = ranged(1.0, 0.1, 60)  # time horizon tau of the collision cone [s]
     cbf_velocity_min_speed_mps: float = ranged(0.2, 0, 5)  # slower tracked obstacles get no cone row [m/s]
@@ -257,8 +249,7 @@ class StackParams:
                 raise FieldError(k, f"must be a finite number > 0, got {v}")
         nonneg = dict(v_freeze_mps=self.v_freeze_mps, eps_h_m2=self.eps_h_m2, w_W=self.w_W, w_P=self.w_P,
                       w_F=self.w_F, w_sw=self.w_sw, w_S=self.w_S, release_range_m=self.release_range_m,
-                      d_pass_min_m=self.d_pass_min_m, in_way_margin_m=self.in_way_margin_m,
-                      relevant_range_m=self.relevant_range_m, dwell_s=self.dwell_s, switch_rel=self.switch_rel,
+                      d_pass_min_m=self.d_pass_min_m, dwell_s=self.dwell_s, switch_rel=self.switch_rel,
                       switch_abs=self.switch_abs, noshared_margin_m=self.noshared_margin_m)
         for k, v in nonneg.items():
             if not (math.isfinite(v) and v >= 0):
@@ -290,6 +281,65 @@ class StackParams:
     def weights(self) -> tuple[float, float, float, float, float]:
         """(w_W, w_P, w_F, w_sw, w_S) of eq:behavior_cost (14)."""
         return (self.w_W, self.w_P, self.w_F, self.w_sw, self.w_S)
+
+
+@dataclass(frozen=True)
+class PlusRules:
+    """Our rules beyond the paper: the parameters of the method ``big-cbf-plus`` (``[methods.big-cbf-plus]`` of a
+    run configuration). Each is a named switch over the one implementation of the behaviors, the imagination and
+    the selection (``bigcbf.control.behaviors``, ``imagination``, ``selection``, ``governor``); every switch off
+    (:data:`PAPER_RULES`) is ``big-cbf``, the paper as written. The defaults are BIG-CBF as it was before issue 24
+    (every switch on, the speed governor off as it was); docs/fidelity.md gives each switch's measured effect.
+
+    - ``in_way_band``: an obstacle is "in the way" (the locally relevant obstacle of eq:behavior_subgoals (10)) when
+      the goal line passes within r_R + r_i + d0 + ``in_way_margin_m`` of it (off: within r_R + r_i + d0, the
+      clearance of eq:true_safety_requirement (6)).
+    - ``fixed_lookahead``: the relevant obstacle is looked for within ``relevant_range_m`` of the robot (off: within
+      v_max N dt, the distance the imagination's horizon covers at full speed).
+    - ``pass_group_reach``: d_pass = max(d_pass_min, reach of the relevant obstacle's group on side sigma + r_R +
+      0.35), the group being the obstacles the footprint cannot pass between (off: the constant d_pass_min).
+    - ``pass_forward_beside``: PASS's forward component max(0.85, s_i) for a relevant obstacle alone in its group
+      (off: eq:behavior_subgoals's 0.85 m).
+    - ``side_commitment``: once left or right was chosen, the opposite side must beat it by the switching
+      threshold plus w_sw (off: the dwell and threshold rule alone).
+    - ``release_fan``: the reverse release is chosen among a fan of 10 velocities by least barrier deficit (off:
+      the push, away from the close obstacles, else straight back from the goal).
+    - ``release_sideways``: the push releases from a moving obstacle perpendicular to its velocity (off: along
+      p - p_i, as from a static one).
+    - ``speed_governor``: the liveness option (``bigcbf.control.governor``: GOAL/PASS/SIDE at the speed a model of
+      the common CBF admits, with the selection's viability test and the release outlook). Off by default, as it
+      was.
+    """
+
+    in_way_band: bool = True
+    in_way_margin_m: float = ranged(0.15, 0, 10)  # the band beyond r_R + r_i + d0 (in_way_band) [m]
+    fixed_lookahead: bool = True
+    relevant_range_m: float = ranged(3.0, 0, 100)  # look-ahead for the relevant obstacle (fixed_lookahead) [m]
+    pass_group_reach: bool = True
+    pass_forward_beside: bool = True
+    side_commitment: bool = True
+    release_fan: bool = True
+    release_sideways: bool = True
+    speed_governor: bool = False
+
+    def __post_init__(self):
+        check_field_ranges(self)
+        for f in dataclasses.fields(self):
+            if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
+                raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
+        for k in ("in_way_margin_m", "relevant_range_m"):
+            if not math.isfinite(getattr(self, k)):
+                raise FieldError(k, "must be finite")
+
+    @property
+    def switches(self) -> dict[str, bool]:
+        """The named switches and their states."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if isinstance(getattr(self, f.name), bool)}
+
+
+#: every switch off: BIG-CBF as the paper writes it (``big-cbf``, ``big-cbf-noshared``)
+PAPER_RULES = PlusRules(**{f.name: False for f in dataclasses.fields(PlusRules) if f.type in (bool, "bool")})
 
 
 #: Table I, the simulation profile.
