@@ -24,7 +24,7 @@ LO, HI = np.asarray(P.u_min), np.asarray(P.u_max)
 
 
 def test_all_eight_registered():
-    assert set(METHODS.names()) == {"big-cbf", "big-cbf-noshared", "cbf-only", *NEW}
+    assert set(METHODS.names()) == {"big-cbf", "big-cbf-noshared", "big-cbf-plus", "cbf-only", "dpcbf", *NEW}
     for name in NEW:
         pl = METHODS.get(name)(P)
         assert isinstance(pl, Planner) and pl.name == name and BASELINES[name] is type(pl)

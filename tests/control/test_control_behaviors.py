@@ -9,9 +9,11 @@ from bigcbf.control.behaviors import (MODE_INDEX, behavior_command, feedback_vel
                                       obstacle_groups,
                                       policy_velocity, relevant_obstacle, release_velocity, subgoal_error)
 from bigcbf.params import SIMULATION
+from bigcbf.params.stack import PlusRules
 from bigcbf.types import Obstacles, RobotState
 
 P = SIMULATION
+PLUS = PlusRules()      # big-cbf-plus: the by-hand tests of our PASS rules below (the paper's: test_paper_fidelity.py)
 MODES7 = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R", "YIELD", "REVERSE")
 
 
@@ -45,17 +47,18 @@ def test_feedback_eq_8_by_hand():
 
 
 def test_subgoals_eq_7_obstacle_dead_ahead():
-    """Robot (0,0), goal (5,0): d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 <
+    """big-cbf-plus's PASS rules (in_way_band, pass_forward_beside, pass_group_reach). Robot (0,0), goal (5,0):
+    d_g = (1,0), n_g = (0,1). Obstacle (2, 0.1), r 0.3: relevant (|c| = 0.1 <
     0.15 + 0.3 + 0.1 + 0.15 = 0.7). PASS forward: max(0.85, s_i = 2) = 2 (beside the obstacle).
     PASS-L: d_pass = max(0.3, 0.1 + 0.3 + 0.15 + 0.35) = 0.9, floor 0.15 + 0.3 + 0.35 = 0.8 -> offset 0.9.
     PASS-R: d_pass = max(0.3, -0.1 + 0.3 + 0.5) = 0.7 -> offset 0.8 (the floor)."""
     obs = Obstacles.from_lists([[2.0, 0.1]], r=0.3)
     p = np.zeros((7, 2))
-    e = subgoal_error(mode_indices(MODES7), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
+    e = subgoal_error(mode_indices(MODES7), p, np.array([5.0, 0.0]), obs.p, obs.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[5, 0], [2.0, 0.9], [2.0, -0.8], [0.45, 0.8], [0.45, -0.8], [0, 0], [0, 0]])
     # an obstacle nearer than 0.85 m ahead: the paper's 0.85 m
     near = Obstacles.from_lists([[0.5, 0.1]], r=0.3)
-    e = subgoal_error(mode_indices(("PASS-L",)), p[:1], np.array([5.0, 0.0]), near.p, near.r, P)
+    e = subgoal_error(mode_indices(("PASS-L",)), p[:1], np.array([5.0, 0.0]), near.p, near.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[0.85, 0.9]])
 
 
@@ -66,11 +69,11 @@ def test_subgoals_eq_7_obstacle_offset_to_one_side():
     At (1.5, 0.6) it is not in the way (driving straight keeps the footprint 0.35 m > d0 + 0.15 m from it):
     PASS keeps its goal-directed 0.85 m."""
     obs = Obstacles.from_lists([[1.5, 0.45]], r=0.1)
-    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P)
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), obs.p, obs.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[1.5, 1.05], [1.5, -0.6]])
     beside = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
     e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), beside.p,
-                      beside.r, P)
+                      beside.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[0.85, 0.0], [0.85, 0.0]])
 
 
@@ -82,9 +85,9 @@ def test_in_a_gap_the_relevant_obstacle_is_the_one_behind_it():
     obs = Obstacles.from_lists([[0.1, 0.69], [0.1, -0.69], [1.5, 0.09]], r=0.2)
     p = np.zeros((1, 2))
     d, _, _ = goal_basis(p, np.array([5.0, 0.0]))
-    j, c, r = relevant_obstacle(p, d, obs.p, obs.r, P)
+    j, c, r = relevant_obstacle(p, d, obs.p, obs.r, P, rules=PLUS)
     assert j.tolist() == [2] and c[0] == pytest.approx(0.09)
-    e = subgoal_error(mode_indices(("PASS-R",)), p, np.array([5.0, 0.0]), obs.p, obs.r, P)
+    e = subgoal_error(mode_indices(("PASS-R",)), p, np.array([5.0, 0.0]), obs.p, obs.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[1.5, -0.7]])
 
 
@@ -152,10 +155,10 @@ def test_pass_clears_the_whole_group_of_a_wide_obstacle():
     max(0.3, 0.5, 0.5), forward max(0.85, 2) = 2."""
     ys = np.linspace(-1.0, 1.0, 11)
     wall = Obstacles.from_lists(np.stack([np.full(11, 2.0), ys], 1), r=0.0, ids=-np.ones(11, int))
-    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), wall.p, wall.r, P)
+    e = subgoal_error(mode_indices(("PASS-L", "PASS-R")), np.zeros((2, 2)), np.array([5.0, 0.0]), wall.p, wall.r, P, rules=PLUS)
     np.testing.assert_allclose(e, [[0.85, 1.5], [0.85, -1.5]])   # a group: the paper's 0.85 m forward
     lone = wall.subset([5])
-    e1 = subgoal_error(mode_indices(("PASS-L",)), np.zeros((1, 2)), np.array([5.0, 0.0]), lone.p, lone.r, P)
+    e1 = subgoal_error(mode_indices(("PASS-L",)), np.zeros((1, 2)), np.array([5.0, 0.0]), lone.p, lone.r, P, rules=PLUS)
     np.testing.assert_allclose(e1, [[2.0, 0.5]])                  # a lone point: beside it, 2 m ahead
 
 
@@ -178,21 +181,22 @@ def test_release_from_a_moving_obstacle_is_sideways():
     np.testing.assert_allclose(v, [[0.3, 0.0]], atol=1e-12)
 
 
-def test_the_in_way_band_is_each_variants_imagination_margin():
-    """BIG-CBF: in_way_margin_m (0.15 m); NoShared: its fixed imagination margin (0.30 m). An obstacle (1.5, 0.6),
-    r 0.1, is in the way of NoShared's straight line (0.6 < 0.15 + 0.1 + 0.1 + 0.30 = 0.65), which its barrier
-    (D = 0.65) would reject, but not of BIG-CBF's (0.6 > 0.5)."""
-    from bigcbf.control.big_cbf import BigCbfPlanner
+def test_the_in_way_band_is_a_plus_rule_and_noshared_keeps_the_paper_s():
+    """big-cbf-plus (rule in_way_band): an obstacle is in the way within r_R + r_i + d0 + 0.15 m of the goal line;
+    big-cbf and big-cbf-noshared (the paper's rules): within r_R + r_i + d0, the same for both (NoShared differs only
+    in the imagination margin). An obstacle (1.0, 0.45), r 0.1 (within both look-aheads): 0.45 < 0.15 + 0.1 + 0.1 + 0.15 = 0.5 for plus, not
+    < 0.35 for the paper's; (1.0, 0.3): in the way for all."""
+    from bigcbf.control.big_cbf import BigCbfPlanner, BigCbfPlusPlanner
 
-    shared, noshared = BigCbfPlanner(P).params, BigCbfPlanner(P, shared=False).params
-    assert shared.in_way_margin_m == P.in_way_margin_m == 0.15
-    assert noshared.in_way_margin_m == P.noshared_margin_m == 0.30
-    obs = Obstacles.from_lists([[1.5, 0.6]], r=0.1)
+    shared, noshared, plus = BigCbfPlanner(P), BigCbfPlanner(P, shared=False), BigCbfPlusPlanner(P)
+    assert shared.params is noshared.params is P and shared.rules == noshared.rules
     p = np.zeros((1, 2))
     d, _, _ = goal_basis(p, np.array([5.0, 0.0]))
-    assert relevant_obstacle(p, d, obs.p, obs.r, shared)[0].tolist() == [-1]
-    assert relevant_obstacle(p, d, obs.p, obs.r, noshared)[0].tolist() == [0]
-
+    for y, paper_in_way in ((0.45, False), (0.3, True)):
+        obs = Obstacles.from_lists([[1.0, y]], r=0.1)
+        assert relevant_obstacle(p, d, obs.p, obs.r, P, plus.rules)[0].tolist() == [0]
+        for planner in (shared, noshared):
+            assert relevant_obstacle(p, d, obs.p, obs.r, P, planner.rules)[0].tolist() == [0 if paper_in_way else -1]
 
 def test_alone_in_group_by_hand():
     """Groups [0, 0, 1, 2, 2, 3]: obstacles 2 and 5 are alone; an empty scan has none."""

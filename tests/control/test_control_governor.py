@@ -12,7 +12,7 @@ from bigcbf.params import SIMULATION, ExecutionModel, UncertaintyParams
 from bigcbf.types import Obstacles, RobotState
 
 # no uncertainty terms and ideal execution: D = r_R + r_i + d0 = 0.15 + 0.25 + 0.10 = 0.5 for r_i = 0.25
-BARE = dataclasses.replace(SIMULATION, speed_governor=True, uncertainty=UncertaintyParams(
+BARE = dataclasses.replace(SIMULATION, uncertainty=UncertaintyParams(
     tau95_s=0.0, beta=0.0, e_zoh_m=0.0, execution=ExecutionModel(residual_bound_mps=(0.0, 0.0))))
 
 
@@ -43,10 +43,20 @@ def test_obstacle_dead_ahead_slows_to_the_largest_admissible_scale():
     obs = Obstacles.from_lists([[0.7, 0.0]], r=0.25)
     u, s1 = govern_command(RobotState(0, 0, 0), obs, np.array([0.8, 0.0, 0.0]), BARE)
     assert s1 == pytest.approx(0.4) and u == pytest.approx([0.32, 0.0, 0.0])
-    # off: the nominal command
-    off = dataclasses.replace(BARE, speed_governor=False)
-    u, s1 = govern_command(RobotState(0, 0, 0), obs, np.array([0.8, 0.0, 0.0]), off)
-    assert s1 == 1.0 and u == pytest.approx([0.8, 0.0, 0.0])
+    # the planners: big-cbf (the paper's) commands the policy as it is; big-cbf-plus with the rule speed_governor
+    # commands the governed policy; the rule is off in big-cbf-plus's defaults
+    from bigcbf.control.behaviors import behavior_command
+    from bigcbf.control.big_cbf import BigCbfPlanner, BigCbfPlusPlanner
+    from bigcbf.params.stack import PlusRules
+    goal, state = np.array([3.0, 0.0]), RobotState(0, 0, 0)
+    far = Obstacles.from_lists([[1.2, 0.6]], r=0.25)
+    for planner, governed in ((BigCbfPlanner(BARE), False), (BigCbfPlusPlanner(BARE), False),
+                              (BigCbfPlusPlanner(BARE, PlusRules(speed_governor=True)), True)):
+        u, info = planner.plan(0.0, state, far, goal)
+        want = behavior_command(info.mode, state, far, goal, BARE, rules=planner.rules)
+        if governed:
+            want = govern_command(state, far, want, BARE)[0]
+        assert u == pytest.approx(want)
 
 
 def test_obstacle_ahead_right_keeps_full_speed_and_slides_along_the_row():

@@ -12,6 +12,7 @@ from bigcbf.control.imagination import imagine, rollout_paths
 from bigcbf.control.prediction import predict_obstacles, q_sigma_for
 from bigcbf.control.uncertainty import inflated_radius, uncertainty_radius
 from bigcbf.params import PHYSICAL, SIMULATION, ExecutionModel, UncertaintyParams
+from bigcbf.params.stack import PAPER_RULES, PlusRules
 from bigcbf.types import Obstacles, RobotState
 
 MODES7 = BEHAVIORS + ("REVERSE",)
@@ -21,7 +22,7 @@ def rot(th):
     return np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
 
 
-def reference(state, obs, goal, params, modes, shared, current):
+def reference(state, obs, goal, params, modes, shared, current, rules=PAPER_RULES):
     """Straightforward loops over behaviors, steps and obstacles, built from the scalar helpers."""
     unc, ex = params.uncertainty, params.uncertainty.execution
     N, dt = params.N, params.dt_s
@@ -48,9 +49,9 @@ def reference(state, obs, goal, params, modes, shared, current):
 
         for k in range(N):
             o_k = Obstacles(Pp[k], obs.v, cov[k], obs.r, obs.static, obs.ids)
-            u = behavior_command(b, RobotState(x[0], x[1], th), o_k, goal, params, groups)
+            u = behavior_command(b, RobotState(x[0], x[1], th), o_k, goal, params, groups, rules=rules)
             move = None
-            if params.speed_governor and b not in ("YIELD", "REVERSE") and len(obs):   # governor.py, per state
+            if rules.speed_governor and b not in ("YIELD", "REVERSE") and len(obs):   # governor.py, per state
                 s, w = govern_c(np.array([complex(*x)]), np.array([np.exp(1j * th)]), np.array([complex(*u[:2])]),
                                 Pp[k, :, 0] + 1j * Pp[k, :, 1], obs.v[:, 0] + 1j * obs.v[:, 1],
                                 obstacle_sigma_term(cov[k], params), obs.r, params)
@@ -100,23 +101,26 @@ IMPERFECT = dataclasses.replace(SIMULATION, uncertainty=dataclasses.replace(
         residual_speed_mps=(0.0, 0.3, 0.8), residual_bound_mps=(0.01, 0.03, 0.06))))
 
 
-@pytest.mark.parametrize("params", [SIMULATION, IMPERFECT, PHYSICAL,       # and with the liveness option:
-                                    dataclasses.replace(SIMULATION, speed_governor=True),
-                                    dataclasses.replace(IMPERFECT, speed_governor=True)])
+@pytest.mark.parametrize("params, rules", [(SIMULATION, PAPER_RULES), (IMPERFECT, PAPER_RULES), (PHYSICAL, PAPER_RULES),
+                                           (SIMULATION, PlusRules()), (IMPERFECT, PlusRules()),
+                                           # and with the liveness option:
+                                           (SIMULATION, PlusRules(speed_governor=True)),
+                                           (IMPERFECT, PlusRules(speed_governor=True))])
 @pytest.mark.parametrize("shared", [True, False])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_vectorized_matches_reference(params, shared, seed):
+def test_vectorized_matches_reference(params, rules, shared, seed):
     state, obs, goal = scene(seed)
     current = ["GOAL", None, "PASS-R"][seed]
-    img = imagine(state, obs, goal, params, modes=MODES7, shared=shared, current=current)
-    ref = reference(state, obs, goal, params, MODES7, shared, current)
+    img = imagine(state, obs, goal, params, modes=MODES7, shared=shared, current=current, rules=rules)
+    ref = reference(state, obs, goal, params, MODES7, shared, current, rules)
     for b, r in enumerate(ref):
         np.testing.assert_allclose(img.p[b], r["p"], atol=1e-9)
         np.testing.assert_allclose(img.u[b], r["u"], atol=1e-9)
         for key, got in (("h_min", img.h_min), ("W", img.W), ("P", img.P), ("F", img.F), ("S", img.S),
                          ("J", img.J)):
             assert got[b] == pytest.approx(r[key], rel=1e-9, abs=1e-9), (MODES7[b], key)
-    np.testing.assert_allclose(rollout_paths(state, obs, goal, params, ("REVERSE",))[0], img.p[-1], atol=1e-12)
+    if rules == PAPER_RULES:        # rollout_paths imagines the paper's policies
+        np.testing.assert_allclose(rollout_paths(state, obs, goal, params, ("REVERSE",))[0], img.p[-1], atol=1e-12)
 
 
 def test_one_step_by_hand_eqs_10_16_17():
@@ -128,7 +132,7 @@ def test_one_step_by_hand_eqs_10_16_17():
     unc = UncertaintyParams(tau95_s=0.0, beta=0.0, e_zoh_m=0.0, execution=ExecutionModel(
         residual_bound_mps=(0.0, 0.0)))
     # eq:behavior_feedback (11) literally
-    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc, speed_governor=False)
+    params = dataclasses.replace(SIMULATION, N=1, uncertainty=unc)
     obs = Obstacles.from_lists([[0.7, 0.0]], r=0.25)
     img = imagine(RobotState(0, 0, 0), obs, np.array([5.0, 0.0]), params, current="GOAL")
     g = img.index("GOAL")

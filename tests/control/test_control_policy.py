@@ -11,9 +11,11 @@ from bigcbf.control.behaviors import (BEHAVIORS, MODES, REVERSE, PolicyData, beh
 from bigcbf.control.governor import govern_command
 from bigcbf.control.imagination import choose_release, imagine
 from bigcbf.params import PHYSICAL, SIMULATION
+from bigcbf.params.stack import PAPER_RULES, PlusRules
 from bigcbf.types import Obstacles, RobotState
 
-GOVERNED = dataclasses.replace(SIMULATION, speed_governor=True)
+PLUS = PlusRules()                                  # big-cbf-plus's rules
+GOVERNED = PlusRules(speed_governor=True)           # and the liveness option
 
 
 def scene(seed):
@@ -33,9 +35,10 @@ def scene(seed):
     return state, Obstacles(p, v, cov, r, static, ids), rng.uniform([4.0, -1.5], [6.0, 1.5])
 
 
-@pytest.mark.parametrize("params", [SIMULATION, PHYSICAL, GOVERNED])
+@pytest.mark.parametrize("params, rules", [(SIMULATION, PAPER_RULES), (PHYSICAL, PAPER_RULES), (SIMULATION, PLUS),
+                                           (PHYSICAL, PLUS), (SIMULATION, GOVERNED)])
 @pytest.mark.parametrize("seed", range(6))
-def test_the_rollout_starts_with_the_command_the_robot_gets(params, seed):
+def test_the_rollout_starts_with_the_command_the_robot_gets(params, rules, seed):
     """At k = 0 the imagined robot and obstacles are the real ones, so the imagined command u_0 of every behavior
     is the command the execution loop would send in that mode (with the speed governor: governed, the same scale).
     Heading along the x axis the body and world frames coincide and the two are equal bit for bit; at another
@@ -43,10 +46,10 @@ def test_the_rollout_starts_with_the_command_the_robot_gets(params, seed):
     state, obs, goal = scene(seed)
     for theta in (0.0, state.theta):
         at = RobotState(state.px, state.py, theta)
-        img = imagine(at, obs, goal, params)
+        img = imagine(at, obs, goal, params, rules=rules)
         for b, mode in enumerate(BEHAVIORS):
-            u = behavior_command(mode, at, obs, goal, params)
-            if params.speed_governor and mode != "YIELD":
+            u = behavior_command(mode, at, obs, goal, params, rules=rules)
+            if rules.speed_governor and mode != "YIELD":
                 u = govern_command(at, obs, u, params)[0]
             if theta == 0.0:
                 np.testing.assert_array_equal(img.u[b, 0], u, err_msg=mode)
@@ -54,13 +57,14 @@ def test_the_rollout_starts_with_the_command_the_robot_gets(params, seed):
                 np.testing.assert_allclose(img.u[b, 0], u, rtol=0, atol=1e-15, err_msg=mode)
 
 
+@pytest.mark.parametrize("rules", [PAPER_RULES, PLUS])
 @pytest.mark.parametrize("seed", range(3))
-def test_the_release_rollout_starts_with_the_executed_release(seed):
+def test_the_release_rollout_starts_with_the_executed_release(seed, rules):
     """The fallback: the chosen release velocity's rollout starts with the command REVERSE then executes."""
     state, obs, goal = scene(seed)
     state = RobotState(state.px, state.py, 0.0)
-    v, rel, best = choose_release(state, obs, goal, SIMULATION)
-    u = behavior_command(REVERSE, state, obs, goal, SIMULATION, release_v=v)
+    v, rel, best = choose_release(state, obs, goal, SIMULATION, rules=rules)
+    u = behavior_command(REVERSE, state, obs, goal, SIMULATION, release_v=v, rules=rules)
     np.testing.assert_array_equal(rel.u[best, 0], u)
 
 
@@ -70,12 +74,12 @@ def test_policy_data_evaluates_every_row_at_its_own_position_and_obstacles():
     push from where they are (release_velocity), with one they keep it; every row is 0 in the goal region."""
     state, obs, goal = scene(1)
     idx = mode_indices(MODES)
-    data = PolicyData.build(idx, goal, obs.p, obs.r, SIMULATION, obs_v=obs.v)
+    data = PolicyData.build(idx, goal, obs.p, obs.r, SIMULATION, obs_v=obs.v, rules=PLUS)
     rng = np.random.default_rng(5)
     p = rng.uniform([-0.5, -1.0], [1.0, 1.0], (len(idx), 2))
     moved = obs.p + 0.4 * obs.v
     v = data.velocity(p[:, 0] + 1j * p[:, 1], moved[:, 0] + 1j * moved[:, 1])
-    want = policy_velocity(idx, p, goal, moved, obs.r, SIMULATION, groups=data.groups, obs_v=obs.v)
+    want = policy_velocity(idx, p, goal, moved, obs.r, SIMULATION, groups=data.groups, obs_v=obs.v, rules=PLUS)
     assert np.stack([v.real, v.imag], -1).tobytes() == want.tobytes()
     np.testing.assert_array_equal(want[-1], release_velocity(p[-1:], goal, moved, obs.r, SIMULATION, obs.v)[0])
     chosen = PolicyData.build(idx, goal, obs.p, obs.r, SIMULATION, release=0.1 - 0.2j)

@@ -6,13 +6,17 @@ import numpy as np
 import pytest
 
 from bigcbf.control import METHODS, BigCbfPlanner, CbfFilter, behavior_command
+from bigcbf.control.big_cbf import BigCbfPlusPlanner
 from bigcbf.control.imagination import Imagination
 from bigcbf.control.selection import BehaviorSelector
 from bigcbf.params import SIMULATION
+from bigcbf.params.stack import PlusRules
 from bigcbf.types import Obstacles, RobotState
 
 P = SIMULATION
-GOV = dataclasses.replace(SIMULATION, speed_governor=True)     # the liveness option (governor.py)
+GOV = SIMULATION
+GOVR = PlusRules(speed_governor=True)     # big-cbf-plus with the liveness option (governor.py)
+PLUS = PlusRules()                        # big-cbf-plus as it ships (the rules that were big-cbf's before issue 24)
 GOAL = np.array([5.0, 0.0])
 
 
@@ -110,8 +114,8 @@ def test_release_leaves_an_approaching_pedestrian_path_not_just_a_wall():
     obs = Obstacles.from_lists(np.r_[wall, [[0.7, 0.9]]], v=np.r_[np.zeros((7, 2)), [[0.0, -1.0]]],
                                r=np.r_[np.zeros(7), 0.25], cov=np.eye(2) * 0.01,
                                static=np.r_[np.ones(7, bool), False], ids=np.r_[-np.ones(7, int), 0])
-    v, img, best = choose_release(state, obs, GOAL, P)
-    cand = release_candidates(state, obs, GOAL, P)
+    v, img, best = choose_release(state, obs, GOAL, P, rules=PLUS)      # the fan: big-cbf-plus's rule
+    cand = release_candidates(state, obs, GOAL, P, PLUS)
     assert cand[0].imag > 0                              # the push: away from the wall, towards the path
     assert v[0] < 0 and np.hypot(*v) == pytest.approx(P.v_release_mps)
     assert img.deficit[best] == img.deficit.min() < img.deficit[0]
@@ -194,7 +198,7 @@ def test_noshared_variant_runs_the_same_loop():
 
 def test_governed_static_obstacle_dead_ahead_one_side():
     obs = Obstacles.from_lists([[2.0, 0.0]], r=0.3)
-    sel, state, min_h = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10 * P.T_B_s)
+    sel, state, min_h = closed_loop(BigCbfPlusPlanner(GOV, GOVR), lambda t: obs, GOAL, 10 * P.T_B_s)
     assert len(sel) == 10
     # the governed GOAL slows down in front of the post (governor.py) and is kept while it progresses; a sided
     # maneuver takes over before the post, on one side only: no left/right chattering
@@ -203,18 +207,18 @@ def test_governed_static_obstacle_dead_ahead_one_side():
     # the filter slides the governed PASS along the post (governor.py): the discrete loop dips 0.009 m^2 into h < 0
     assert np.linalg.norm(state.p - obs.p[0]) > 0.45 and min_h > -P.eps_h_m2
     # it does get past the obstacle and on to the goal
-    sel, state, _ = closed_loop(BigCbfPlanner(GOV), lambda t: obs, GOAL, 10.0)
+    sel, state, _ = closed_loop(BigCbfPlusPlanner(GOV, GOVR), lambda t: obs, GOAL, 10.0)
     assert np.linalg.norm(state.p - GOAL) <= P.eps_g_m
 
 
 def test_governed_crossing_pedestrian_pass_behind():
-    planner = BigCbfPlanner(GOV)
+    planner = BigCbfPlusPlanner(GOV, GOVR)
     planner.plan(0.0, RobotState(0, 0, 0), pedestrian(0.0), GOAL)
     assert planner.mode in ("YIELD", "PASS-R", "SIDE-R")     # behind it = on its right (where it comes from)
     img = planner.last_imagination
     # straight on (governed: it slows down in front of the person) scores worse than going behind
     assert img.J[img.index("GOAL")] > img.J[img.index(planner.mode)]
-    _, state, min_h = closed_loop(BigCbfPlanner(GOV), pedestrian, GOAL, 8.0)
+    _, state, min_h = closed_loop(BigCbfPlusPlanner(GOV, GOVR), pedestrian, GOAL, 8.0)
     assert min_h > -P.eps_h_m2 and np.linalg.norm(state.p - GOAL) <= P.eps_g_m
 
 
@@ -228,7 +232,7 @@ def test_progress_along_the_maneuver_open_space_by_hand():
         GOV.uncertainty, execution=dataclasses.replace(GOV.uncertainty.execution, A=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                                                    (0.0, 0.0, 1.0)), d=(0.0, 0.0, 0.0))))
     from bigcbf.control.imagination import imagine
-    img = imagine(RobotState(0, 0, 0), Obstacles.empty(), np.array([5.0, 0.0]), ideal)
+    img = imagine(RobotState(0, 0, 0), Obstacles.empty(), np.array([5.0, 0.0]), ideal, rules=GOVR)
     g, sl = img.index("GOAL"), img.index("SIDE-L")
     assert img.along[g] == pytest.approx(1.2) and img.P[g] == pytest.approx(1.2)
     assert img.along[sl] == pytest.approx(0.825)
@@ -245,7 +249,7 @@ def test_governed_pocket_goal_stalls_lateral_maneuvers_still_viable():
     them: viable (this is what lets a sidestep in front of a wide obstacle be kept, docs/fidelity.md "Liveness";
     its cost, measured there: in a pocket the robot then shuttles sideways)."""
     walls = pocket()
-    planner = BigCbfPlanner(GOV)
+    planner = BigCbfPlusPlanner(GOV, GOVR)
     u, info = planner.plan(0.0, RobotState(0.25, 0, 0), walls, np.array([4.0, 0.0]))
     img = planner.last_imagination
     stall = GOV.v_freeze_mps * GOV.N * GOV.dt_s
@@ -261,12 +265,12 @@ def test_release_from_inside_a_static_margin_backs_off_towards_a_viable_maneuver
     lowest J of a viable behavior imagined T_B after it (release_outlook)."""
     from bigcbf.control.imagination import choose_release, release_candidates, release_outlook
     obs = Obstacles.from_lists([[0.35, 0.0]], r=0.2)
-    planner = BigCbfPlanner(GOV)
+    planner = BigCbfPlusPlanner(GOV, GOVR)
     u, info = planner.plan(0.0, RobotState(0, 0, 0), obs, GOAL)
     assert info.mode == "REVERSE"
-    v, img, best = choose_release(RobotState(0, 0, 0), obs, GOAL, GOV)
-    cand = release_candidates(RobotState(0, 0, 0), obs, GOAL, GOV)
-    J_after = release_outlook(img, obs, GOAL, GOV)
+    v, img, best = choose_release(RobotState(0, 0, 0), obs, GOAL, GOV, rules=GOVR)
+    cand = release_candidates(RobotState(0, 0, 0), obs, GOAL, GOV, GOVR)
+    J_after = release_outlook(img, obs, GOAL, GOV, rules=GOVR)
     assert np.isfinite(J_after).any() and J_after[best] == J_after.min()
     assert v == pytest.approx([cand[best].real, cand[best].imag])
     np.testing.assert_allclose(u[:2], v, atol=1e-9)                # body = world at yaw 0
