@@ -6,17 +6,23 @@ regular behavior is rejected. A policy maps (robot position, obstacles, goal) to
 v_b (eq:behavior_feedback); the body command is u = [R(theta)^T v_b, 0]: the behaviors are purely translational
 (holonomic base, 360 degree LiDAR), yaw is not commanded.
 
-Choices the paper leaves open (documented here, parameters in StackParams):
+Choices the paper leaves open, one each (``big-cbf``, every rule of ours off; docs/fidelity.md, "paper silent"):
 
-* Locally relevant obstacle i of eq:behavior_subgoals: seen from the robot along the goal direction d_g, with
-  along-track distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest s_i)
-  obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead (s_i - r_i <
-  ``relevant_range_m``) and in the way: |c_i| < r_R + r_i + d0 + ``in_way_margin_m``, i.e. driving straight to the
-  goal would bring the footprint closer than d0 + 0.15 m to it, about the imagination's own margin for a static
-  obstacle (the barrier test of eq:behavior_acceptance (22)). Wall points (radius 0) take part like any obstacle. (With
-  d_pass_min, 0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot centred in it, and PASS
-  steered around the outside of one of them, into it: docs/fidelity.md, "Behavior imagination and selection".)
-* The forward component of PASS's subgoal: eq:behavior_subgoals's 0.85 d_g, or, for a relevant obstacle alone in
+* Locally relevant obstacle i of eq:behavior_subgoals (10): seen from the robot along the goal direction d_g, with
+  along-track distance s_i = (p_i - p).d_g and cross-track offset c_i = (p_i - p).n_g, it is the nearest (smallest
+  s_i) obstacle that is not yet behind the robot (s_i > -(r_R + r_i)), within the look-ahead (s_i - r_i < v_max N dt,
+  the distance the imagination's horizon covers at full speed: 1.2 m with Table I) and in the way: |c_i| < r_R + r_i
+  + d0, i.e. driving straight to the goal would violate eq:true_safety_requirement (6). Wall points (radius 0) take
+  part like any obstacle (walls: no other handling).
+* d_pass of eq:behavior_subgoals (10), "the minimum lateral passing offset": a constant, ``d_pass_min_m`` = 0.30 m
+  (below the floor r_R + r_i + 0.35 >= 0.50 m, so the floor decides); PASS's forward component is the paper's 0.85 m.
+
+Our rules beyond the paper (``big-cbf-plus``, switches of :class:`~bigcbf.params.stack.PlusRules`):
+
+* ``in_way_band`` (0.15 m beyond r_R + r_i + d0) and ``fixed_lookahead`` (3 m): the relevant obstacle as it was
+  before issue 24. (With d_pass_min, 0.30 m, as the band, both posts beside a 1 m gap were "in the way" of a robot
+  centred in it, and PASS steered around the outside of one of them, into it: docs/fidelity.md.)
+* ``pass_forward_beside``: the forward component of PASS's subgoal, for a relevant obstacle alone in
   its group (one the footprint can pass on either side: a post, a person), its along-track distance s_i when that
   is farther (g = p + max(0.85, s_i) d_g + sigma max(d_pass, ...) n_g): the pass aims at the point beside the
   obstacle. With 0.85 m the pass dives at 45 degrees or more whatever the distance, which clips whatever stands
@@ -24,14 +30,18 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   seen as LiDAR points) keeps the paper's 0.85 m: the pass around a group's end must turn early, and aiming beside
   a 2.7 m wide obstacle's face 3 m ahead made the pass too shallow to clear its end (required_sidestepping: 5 of
   50 seeds timed out where 1 had).
-* d_pass of eq:behavior_subgoals, per side sigma: the lateral shift that puts the robot's footprint, with
+* ``pass_group_reach``: d_pass per side sigma, the lateral shift that puts the robot's footprint, with
   eq:behavior_subgoals's 0.35 m clearance, beside the relevant obstacle's *group* on side sigma, d_pass =
   max(d_pass_min, max_{j in G(i)} (sigma c_j + r_j) + r_R + 0.35). The group G(i) is the set of obstacles connected to i
   by gaps the robot cannot pass through (gap < 2 (r_R + d0) + 0.1 m; see :func:`obstacle_groups`). The paper's scenes
   are circles, where G(i) = {i} and the offset is max(d_pass_min, sigma c_i + r_i + r_R + 0.35), i.e.
   eq:behavior_subgoals's floor r_R + r_i + 0.35 for an obstacle dead ahead, widened for one offset towards side sigma. A
   LiDAR sees a wide obstacle or a wall as many points of radius 0: without the group, PASS would aim 0.5 m beside the
-  nearest point of a 2.5 m wide obstacle and run into it; with it, PASS aims past the structure's end on its side.
+  nearest point of a 2.5 m wide obstacle; with it, PASS aims past the structure's end on its side.
+* ``release_fan``, ``release_sideways``: the REVERSE release (below).
+
+Both:
+
 * Without a relevant obstacle there is nothing to pass: PASS-sigma keeps only its goal-directed component
   (g = p + 0.85 d_g), so a robot that has completed a pass heads for the goal instead of drifting sideways; a
   PASS mode and GOAL then differ only near the goal, where the selection prefers GOAL (PASS overshoots).
@@ -39,12 +49,13 @@ Choices the paper leaves open (documented here, parameters in StackParams):
   movement when dynamic obstacles are present"); in a static scene standing still would never resolve anything.
 * Inside the goal region (eq:goal_region, ||p - p_g|| <= eps_g) every policy commands zero.
 * REVERSE (reverse-release fallback): a constant world-frame release velocity ``release_v`` chosen by the
-  imagination when the fallback is invoked (:func:`bigcbf.control.imagination.choose_release`) from a predefined
-  fan of candidates: the *push* (below), straight back from the goal, seven more headings 45 degrees apart
-  around it, all at ``v_release_mps``, and standing still. Without a chosen velocity (e.g. a direct call), the
-  push: move at ``v_release_mps`` away from the obstacles closer than r_R + r_i + d0 + ``release_range_m``,
-  weighted by how deep they are inside that range; if none is that close (or their pushes cancel), straight
-  back away from the goal. "Away" from a moving obstacle (speed above ``RELEASE_MOVING_MPS``) means out of its
+  imagination when the fallback is invoked (:func:`bigcbf.control.imagination.choose_release`). The paper's
+  "predefined reverse-release fallback" (one choice, ``big-cbf``) is the *push*: move at ``v_release_mps`` away
+  from the obstacles closer than r_R + r_i + d0 + ``release_range_m``, along p - p_i, weighted by how deep they are
+  inside that range; if none is that close (or their pushes cancel), straight back away from the goal. With the
+  rule ``release_fan`` it is chosen from a fan of candidates: the push, straight back from the goal, seven more
+  headings 45 degrees apart around it, all at ``v_release_mps``, and standing still. With the rule
+  ``release_sideways``, "away" from a moving obstacle (speed above ``RELEASE_MOVING_MPS``) means out of its
   path, perpendicular to its velocity (to the side the robot is already on; to the obstacle's right when
   exactly on its path). The push alone is myopic: in the blind corner it backed the robot off a wall corner
   into the path of the person it was releasing from, and the hard CBF then chased it down a side corridor
