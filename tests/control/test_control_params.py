@@ -67,10 +67,10 @@ def test_uncertainty_profile_round_trip(tmp_path):
      "uncertainty.execution.residual_speed_mps", "strictly increasing"),
     ("[uncertainty.execution]\nresidual_speed_mps = [0.1, 0.8]", "uncertainty.execution.residual_speed_mps",
      "start at 0"),
-    ("[uncertainty]\nbeta = -1.0", "uncertainty.beta", "finite number >= 0"),
-    ("u_min = [0.1, -0.8, -1.0]", None, "contain 0"),
-    ("N = 0", "N", "must be in [1, 500]"),
-    ("T_C_s = 0.0001", "T_C_s", "the simulator steps at 2 ms"),
+    ("[uncertainty]\nbeta = -1.0", "uncertainty.beta", "beta must be >= 0 (range [0, 10]), got -1"),
+    ("u_min = [0.1, -0.8, -1.0]", "u_min", "every element of u_min must be in [-10, 0], got 0.1"),
+    ("N = 0", "N", "N must be >= 1 (range [1, 500]), got 0"),
+    ("T_C_s = 0.0001", "T_C_s", "T_C_s must be >= 0.002 (range [0.002, 1]), got 0.0001"),
     ("alpha_per_s = 1e300", "alpha_per_s", "within +-1e+09"),
 ])
 def test_bad_files_name_file_and_key(tmp_path, text, field, words):
