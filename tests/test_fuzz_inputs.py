@@ -393,7 +393,7 @@ CLI = {
     "run": (["scenario"], {"--method": "word", "--seed": "num", "--config": "file", "--profile": "file",
                            "--perception": "word", "--video": "out", "--camera": "word", "--log": "out",
                            "--live": "num", "--json": None, "--robot-profile": "file", "--time-limit": "num",
-                           "--live-wait": "num", "--route": None}),
+                           "--live-wait": "num", "--route": "word"}),
     "demo": ([], {"--seed": "num", "--video": "out", "--no-video": None, "--manoeuvre": None}),
     "perf": ([], {"--json": None, "--quick": None, "--only": "word"}),
     "record": (["what"], {"--robot-profile": "file", "--out": "out", "--seed": "num", "--duration": "num",
@@ -408,7 +408,7 @@ CLI = {
     "bench": ([], {"--out": "out", "--methods": "word", "--suite": "word", "--scenarios": "file", "--split": "word",
                    "--seeds": "num", "--seed-list": "num", "--workers": "num", "--engine": "word",
                    "--ray-address": "word", "--config": "file", "--profile": "file", "--perception": "word",
-                   "--report-only": None, "--docs": "file", "--progress": "word", "--route": None}),
+                   "--report-only": None, "--docs": "file", "--progress": "word", "--route": "word"}),
 }
 #: `bigcbf scenarios generate`'s options
 GENERATE = {"--seed": "num", "--out": "out", "--force": None, "--list": None}
