@@ -1,213 +1,247 @@
 #!/usr/bin/env python3
-"""Measure the choices listed in docs/fidelity.md: BIG-CBF with our choice vs an alternative, on small samples.
+"""Measure each switch of ``big-cbf-plus`` alone, through the switches themselves (issue 24, item 2).
 
-    .venv/bin/python scripts/fidelity_ablations.py [--seeds 5] [--workers 2] [--only NAME ...] [--json OUT]
+    .venv/bin/python scripts/fidelity_ablations.py --out DIR [--workers 2] [--paper-seeds 3]
+        [--worlds-per-family 2] [--only VARIANT ...] [--report-only] [--json FILE] [--markdown FILE]
 
-Each row runs BIG-CBF (or the named method) on a few scenes x seeds with the default robot profile and stack
-parameters ("ours") and once more with one alternative ("alt"): a parameter, or, for choices that are code, a
-patch applied inside the worker for that run only (``unittest.mock.patch``). It prints one Markdown table: per row
-and variant, success, collisions, mean time of the successes, E_CBF, CBF active % (pooled over steps), QP
-infeasible %, the imagination's and the execution's mean margin kappa m_i. A measurement tool: nothing in bigcbf
-imports it, and the stack never runs the alternatives.
+The variants are run configurations, nothing else (no patching): ``big-cbf-plus`` with its defaults (``plus``);
+each switch that is on by default turned off alone (``no_<switch>``); the speed governor, off by default, turned on
+alone (``with_speed_governor``); and ``big-cbf`` (the paper as written, every switch off) as the anchor. Each
+variant's ``[methods.big-cbf-plus]`` table is written to ``DIR/configs/VARIANT.toml`` and run as two
+``bigcbf bench --config VARIANT.toml`` runs: the nine paper scenes at seeds 0..paper_seeds-1 into
+``DIR/VARIANT/paper`` and the first ``worlds-per-family`` worlds of every family's **dev** split (written to
+``DIR/worlds/dev/`` exactly as ``bigcbf bench --suite generated`` writes them; never the test split), episode
+seed 0 as that suite runs them, into ``DIR/VARIANT/dev``. A bench resumes what it has already run, so rerunning
+the command finishes an interrupted measurement.
+
+It then prints one Markdown table from the benches' ``episodes.csv``: per variant the successes (nine scenes,
+dev worlds, both with the Wilson 95 % interval of ``bigcbf.bench.stats``), the paired difference in success
+against ``plus`` over the same (scene or world, seed) episodes (Newcombe's interval and the exact McNemar p of
+``bigcbf.bench.stats.paired_difference``), collisions (at fault / passive), E_CBF (mean per episode), CBF active
+(% of control steps, pooled), QP infeasible (% of steps, pooled) and left/right mode reversals per episode. A
+measurement tool: nothing in bigcbf imports it.
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
-import json
-import os
+import csv
+import subprocess
 import sys
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field, replace
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-STATIC = ("required_sidestepping", "multi_static_clutter", "double_squeeze")
-DYNAMIC = ("blind_corner", "crowd_crossing", "mixed_dense_traffic")
-NARROW = ("corridor_meeting", "double_squeeze", "delay_and_slip")
+PLUS = "big-cbf-plus"
+PAPER = "big-cbf"
+REFERENCE = "plus"
+SETS = ("paper", "dev")
 
 
 @dataclass(frozen=True)
-class Row:
+class Variant:
     name: str
-    what: str                      # the choice and the alternative, in words
-    scenes: tuple[str, ...]
-    alt: str                       # the alternative's key in ALTERNATIVES
-    method: str = "big-cbf"
-    ours: str = "ours"             # the reference's key (default: the shipped settings)
+    method: str
+    switches: dict            # [methods.big-cbf-plus] keys set in its configuration (empty: the defaults)
+    what: str
 
 
-ROWS = [
-    Row("pass_offset", "PASS offset from the relevant obstacle's group vs eq:behavior_subgoals (10) per obstacle",
-        STATIC, "no_groups"),
-    Row("side_commitment", "side commitment in the selection vs plain lowest J", STATIC + ("single_person_crossing",),
-        "no_side_commitment"),
-    Row("cbf_rows", "CBF rows: tracks + nearest wall point per 8 sectors vs every obstacle a row", NARROW,
-        "all_rows"),
-    Row("alpha_low", "alpha 1.5 1/s vs 0.75 1/s", STATIC + DYNAMIC[:1], "alpha_0.75"),
-    Row("alpha_high", "alpha 1.5 1/s vs 3.0 1/s", STATIC + DYNAMIC[:1], "alpha_3"),
-    Row("release_fan", "reverse-release fallback: the fan of 10 candidates vs the push alone", DYNAMIC, "push_only"),
-    Row("wall_spacing", "wall points every 0.2 m vs every 0.4 m", NARROW, "wall_spacing_0.4"),
-    Row("e_exec_horizon", "e_exec horizon T_C + tau95 vs T_C", STATIC + DYNAMIC[:1], "horizon_tc"),
-    Row("e_zoh", "e_ZOH 0.025 m (Table I) vs the calibration's T_C v_99 = 0.040 m", STATIC + DYNAMIC[:1], "e_zoh_cal"),
-    Row("stack_profile", "stack profile: Table I + the twin's calibration vs Table I alone", STATIC + DYNAMIC,
-        "table_i"),
-    Row("robot_profile", "robot: the x3_sim profile vs an ideal robot and sensors (stack: Table I + calibration)",
-        STATIC + DYNAMIC, "ideal_robot"),
-    Row("sensor_noise", "sensors: LiDAR, encoder and gyro noise vs ideal sensors (execution imperfections kept)",
-        STATIC + DYNAMIC, "ideal_sensors"),
-    Row("perception_cov", "covariances from the sensor model / the static filter vs the old constants (wall "
-        "1e-4 m^2, static tracks the CV filter)", STATIC + DYNAMIC, "old_covariances"),
-    Row("young_tracks", "static/dynamic classification from a track's second measurement vs once its velocity "
-        "rests on more than 3 (classify_after_hits 1 vs 3)", STATIC + DYNAMIC, "classify_after_3"),
-    Row("noshared_kappa", "NoShared (hardware preset): fixed 0.30 m vs kappa_img x 0.30 m",
-        ("lab_pedestrian_crossing",), "noshared_kappa", method="big-cbf-noshared", ours="hardware"),
-]
+def variants() -> list[Variant]:
+    """``plus``, each default-on switch off alone, each default-off switch on alone, and ``big-cbf``."""
+    from bigcbf.params.stack import PlusRules
+    out = [Variant(REFERENCE, PLUS, {}, "big-cbf-plus, its defaults")]
+    for name, on in PlusRules().switches.items():
+        if on:
+            out.append(Variant(f"no_{name}", PLUS, {name: False}, f"big-cbf-plus with {name} off"))
+        else:
+            out.append(Variant(f"with_{name}", PLUS, {name: True}, f"big-cbf-plus with {name} on"))
+    out.append(Variant("big-cbf", PAPER, {}, "big-cbf: the paper as written (every switch off)"))
+    return out
 
 
-# --- the variants -------------------------------------------------------------------------------------------------
-
-def _params(key: str):
-    from bigcbf.bench.suites import SUITES
-    from bigcbf.params.stack import SIMULATION, default_stack_params
-    p = default_stack_params()
-    u = p.uncertainty
-    if key == "hardware" or key == "noshared_kappa":
-        return SUITES.get("hardware").params()
-    if key == "alpha_0.75":
-        return replace(p, alpha_per_s=0.75)
-    if key == "alpha_3":
-        return replace(p, alpha_per_s=3.0)
-    if key == "horizon_tc":
-        return replace(p, uncertainty=replace(u, execution=replace(u.execution, residual_horizon_s=p.T_C_s)))
-    if key == "e_zoh_cal":
-        return replace(p, uncertainty=replace(u, e_zoh_m=0.040))
-    if key == "table_i":
-        return SIMULATION
-    return p
+def config_text(v: Variant) -> str:
+    """The variant's run configuration (TOML): its ``[methods.big-cbf-plus]`` table, nothing else."""
+    lines = [f"# scripts/fidelity_ablations.py, variant {v.name}: {v.what}", f"[methods.{PLUS}]"]
+    lines += [f"{k} = {'true' if val else 'false'}" for k, val in v.switches.items()]
+    return "\n".join(lines) + "\n"
 
 
-@contextlib.contextmanager
-def _patches(key: str):
-    """Code alternatives, applied in this process for one episode."""
-    from unittest import mock
-
-    import numpy as np
-    with contextlib.ExitStack() as stack:
-        if key == "no_groups":
-            lone = lambda p, r, params: np.arange(len(np.asarray(r))) if np.ndim(r) else np.zeros(0, int)  # noqa
-            stack.enter_context(mock.patch("bigcbf.control.behaviors.obstacle_groups", lone))
-            stack.enter_context(mock.patch("bigcbf.control.imagination.obstacle_groups", lone))
-        elif key == "no_side_commitment":
-            stack.enter_context(mock.patch("bigcbf.control.selection.BehaviorSelector._best",
-                                           lambda self, img, J: img.modes[int(np.argmin(J))]))
-        elif key == "all_rows":
-            stack.enter_context(mock.patch("bigcbf.control.cbf.select_constraints",
-                                           lambda obstacles, rows, params: np.arange(len(obstacles))))
-        elif key == "push_only":
-            from bigcbf.control import imagination as im
-            real = im.release_candidates
-            stack.enter_context(mock.patch("bigcbf.control.imagination.release_candidates",
-                                           lambda *a, **k: real(*a, **k)[:1]))
-        elif key == "old_covariances":
-            from bigcbf.perception import pipeline, tracker
-
-            def const_wall(points, sensor, dphi, params):
-                return np.broadcast_to(1e-4 * np.eye(2), (len(points), 2, 2)).copy()
-            stack.enter_context(mock.patch.object(pipeline, "wall_point_covariance", const_wall))
-
-            def cv_reported(self, idx):
-                return self.x[idx, :2].copy(), self.P[idx, :2, :2].copy()
-            stack.enter_context(mock.patch.object(tracker.Tracker, "reported", cv_reported))
-        elif key == "noshared_kappa":
-            from bigcbf.control import imagination as im
-            real_imagine = im.imagine
-
-            def imagine(state, obstacles, goal, params, **kw):
-                if not kw.get("shared", True):
-                    kap = im.kappa_img(obstacles, params.uncertainty)
-                    params = replace(params, noshared_margin_m=kap * params.noshared_margin_m)
-                return real_imagine(state, obstacles, goal, params, **kw)
-            stack.enter_context(mock.patch("bigcbf.control.big_cbf.imagine", imagine))
-            stack.enter_context(mock.patch("bigcbf.control.imagination.imagine", imagine))
-        yield
+def dev_worlds(out: Path, per_family: int) -> list[Path]:
+    """The first ``per_family`` world seeds of every family's dev split, written to ``out/worlds/dev/`` as the
+    generated suite writes them (``bigcbf.worlds.generate`` and ``write``)."""
+    from bigcbf import worlds
+    paths = []
+    for k in range(per_family):
+        for fam in worlds.FAMILIES.names():
+            seeds = list(worlds.FAMILIES.get(fam).splits.get("dev", ()))
+            if k < len(seeds):
+                w = worlds.generate(fam, seeds[k])
+                p = out / "worlds" / "dev" / f"{w.name}.toml"
+                worlds.write(w, p)
+                paths.append(p)
+    return paths
 
 
-def _episode(task):
-    variant, method, scenario, seed = task
-    from bigcbf.episode import Episode
-    from bigcbf.params.perception import PerceptionParams
-    from bigcbf.params.robot import ImuModel, LidarModel, OdometryModel, RobotProfile
-    from bigcbf.scenario import load_scenario
-    sc = load_scenario(scenario, seed)
-    if variant == "ideal_robot":
-        sc = replace(sc, robot_profile=RobotProfile(floor_friction=sc.robot_profile.floor_friction))
-    elif variant == "ideal_sensors":
-        sc = replace(sc, robot_profile=replace(sc.robot_profile, lidar=LidarModel(), odometry=OdometryModel(),
-                                               imu=ImuModel()))
-    pp = PerceptionParams()
-    if variant == "wall_spacing_0.4":
-        pp = replace(pp, wall_spacing_m=0.4)
-    if variant == "classify_after_3":
-        pp = replace(pp, classify_after_hits=3)
-    with _patches(variant):
-        r = Episode(sc, method, seed, _params(variant), perception_params=pp).run()
-    return variant, scenario, seed, r.metrics()
+def bench(out: Path, v: Variant, config: Path, scenarios: list[str], seeds: list[int], workers: int) -> None:
+    """One ``bigcbf bench`` of the variant's method with its configuration (resumes a bench already in ``out``)."""
+    cmd = ["bench", "--out", str(out), "--methods", v.method, "--scenarios", *scenarios,
+           "--seed-list", *map(str, seeds), "--workers", str(workers), "--config", str(config), "--progress", "off"]
+    t = time.time()
+    r = subprocess.run([sys.executable, "-c", "import sys; from bigcbf.cli import main; sys.exit(main(sys.argv[1:]))",
+                        *cmd], cwd=ROOT)
+    if r.returncode != 0:
+        sys.exit(f"fidelity_ablations: bigcbf {' '.join(cmd)} exited with status {r.returncode}")
+    print(f"# {v.name} {out.name}: {time.time() - t:.0f} s", file=sys.stderr, flush=True)
 
 
-def summarize(ms: list[dict]) -> dict:
-    import numpy as np
-    n = len(ms)
-    steps = sum(m["control_steps"] for m in ms)
-    succ = [m for m in ms if m["success"]]
+# --- the table --------------------------------------------------------------------------------------------------
 
-    def mean(k):
-        v = [m[k] for m in ms if m.get(k) is not None]
-        return float(np.mean(v)) if v else None
-    return {"episodes": n, "success": sum(m["success"] for m in ms), "collisions": sum(m["collision"] for m in ms),
-            "time_s": float(np.mean([m["time_s"] for m in succ])) if succ else None,
-            "e_cbf": mean("e_cbf"),
-            "active_pct": 100 * sum(m["cbf_active_ratio"] * m["control_steps"] for m in ms) / max(steps, 1),
-            "infeasible_pct": 100 * sum(m["qp_infeasible_ratio"] * m["control_steps"] for m in ms) / max(steps, 1),
-            "m_img": mean("m_img_mean_m"), "m_exec": mean("m_exec_mean_m"),
-            "clearance_m": mean("min_clearance_m")}
+def read_episodes(path: Path, method: str) -> dict[tuple[str, int], dict]:
+    """(scenario, seed) -> the row of one bench's episodes.csv for ``method`` (a world file keyed by its name)."""
+    rows = {}
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            if r["method"] != method:
+                continue
+            if r["status"] != "ok":
+                raise SystemExit(f"fidelity_ablations: {path}: episode {r['scenario']} seed {r['seed']} "
+                                 f"ended with {r['status']}: {r['error']}")
+            rows[(Path(r["scenario"]).stem, int(r["seed"]))] = r
+    return rows
+
+
+def _b(x: str) -> bool:
+    return x.strip().lower() == "true"
+
+
+def summarize(eps: dict[tuple[str, str, int], dict]) -> dict:
+    """Counts and means over episodes keyed (set, scenario, seed)."""
+    from bigcbf.bench.stats import wilson_pct
+    rows = list(eps.values())
+    n = len(rows)
+    steps = sum(int(r["control_steps"]) for r in rows)
+
+    def succ(which):
+        k = [r for (s, _, _), r in eps.items() if which in (None, s)]
+        return sum(_b(r["success"]) for r in k), len(k)
+
+    def mean(key):
+        v = [float(r[key]) for r in rows if r[key] not in ("", None)]
+        return sum(v) / len(v) if v else None
+
+    out = {"episodes": n}
+    for which, tag in ((None, "all"), ("paper", "paper"), ("dev", "dev")):
+        k, m = succ(which)
+        out[f"success_{tag}"] = k
+        out[f"episodes_{tag}"] = m
+        out[f"success_{tag}_ci95_pct"] = wilson_pct(k, m)
+    out.update(
+        collisions=sum(_b(r["collision"]) for r in rows),
+        at_fault=sum(_b(r["at_fault_collision"]) for r in rows),
+        passive=sum(_b(r["passive_collision"]) for r in rows),
+        timeouts=sum(_b(r["timeout"]) for r in rows),
+        e_cbf=mean("e_cbf"),
+        active_pct=100 * sum(float(r["cbf_active_ratio"]) * int(r["control_steps"]) for r in rows) / max(steps, 1),
+        infeasible_pct=100 * sum(float(r["qp_infeasible_ratio"]) * int(r["control_steps"]) for r in rows)
+        / max(steps, 1),
+        side_reversals=mean("side_reversals"))
+    return out
+
+
+def collect(out: Path, vs: list[Variant]) -> dict[str, dict]:
+    """Variant -> {(set, scenario, seed): episode row} from the benches' episodes.csv."""
+    data = {}
+    for v in vs:
+        eps = {}
+        for s in SETS:
+            p = out / v.name / s / "episodes.csv"
+            if not p.is_file():
+                raise SystemExit(f"fidelity_ablations: {p} is missing (run without --report-only)")
+            eps.update({(s, *key): r for key, r in read_episodes(p, v.method).items()})
+        data[v.name] = eps
+    return data
+
+
+def paired(mine: dict, ref: dict) -> dict:
+    """The success difference mine - ref over the episodes both have (same set, scene or world, seed)."""
+    from bigcbf.bench.stats import paired_difference
+    keys = sorted(set(mine) & set(ref))
+    return paired_difference([_b(mine[k]["success"]) for k in keys], [_b(ref[k]["success"]) for k in keys])
 
 
 def _f(v, d=2):
     return "–" if v is None else f"{v:.{d}f}"
 
 
+def _ci(k, n, ci):
+    return f"{k}/{n}" if ci is None else f"{k}/{n} [{ci[0]:.0f}, {ci[1]:.0f}]"
+
+
+def table(data: dict[str, dict], vs: list[Variant]) -> tuple[str, list[dict]]:
+    lines = ["| variant | nine scenes: success [95 % CI, %] | dev worlds: success | all: success | "
+             "vs plus: paired diff. (pp) [95 % CI], McNemar p | collisions (at fault / passive) | timeouts | "
+             "E_CBF | active (%) | QP infeasible (%) | L/R reversals |",
+             "|:---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    rows = []
+    for v in vs:
+        s = summarize(data[v.name])
+        pd = paired(data[v.name], data[REFERENCE]) if v.name != REFERENCE else None
+        rows.append({"variant": v.name, "method": v.method, "switches": v.switches, **s, "paired_vs_plus": pd})
+        diff = "–" if pd is None else (f"{pd['diff_pct']:+.1f} [{pd['ci95_pct'][0]:+.1f}, {pd['ci95_pct'][1]:+.1f}], "
+                                       f"p = {pd['mcnemar_p']:.2f} ({pd['b']} only it, {pd['c']} only plus)")
+        lines.append(
+            f"| {v.name} | {_ci(s['success_paper'], s['episodes_paper'], s['success_paper_ci95_pct'])} | "
+            f"{_ci(s['success_dev'], s['episodes_dev'], s['success_dev_ci95_pct'])} | "
+            f"{_ci(s['success_all'], s['episodes_all'], s['success_all_ci95_pct'])} | {diff} | "
+            f"{s['collisions']} ({s['at_fault']} / {s['passive']}) | {s['timeouts']} | {_f(s['e_cbf'])} | "
+            f"{_f(s['active_pct'], 1)} | {_f(s['infeasible_pct'])} | {_f(s['side_reversals'])} |")
+    return "\n".join(lines) + "\n", rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--out", type=Path, required=True, help="folder for the configurations, worlds and benches")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--only", nargs="+", default=None)
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--paper-seeds", type=int, default=3, help="the nine scenes at seeds 0..N-1 (default 3)")
+    ap.add_argument("--worlds-per-family", type=int, default=2,
+                    help="the first N world seeds of each family's dev split (default 2)")
+    ap.add_argument("--only", nargs="+", default=None, metavar="VARIANT",
+                    help=f"run and report these variants (and {REFERENCE}, the reference)")
+    ap.add_argument("--report-only", action="store_true", help="run nothing; tabulate the benches in --out")
+    ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON here")
+    ap.add_argument("--markdown", type=Path, default=None, help="also write the table here")
     args = ap.parse_args()
-    rows = [r for r in ROWS if args.only is None or r.name in args.only]
-    tasks = sorted({(v, r.method, s, seed) for r in rows for v in (r.ours, r.alt) for s in r.scenes
-                    for seed in range(args.seeds)})
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    results = {}
-    with ProcessPoolExecutor(args.workers) as pool:
-        for variant, scenario, seed, m in pool.map(_episode, tasks):
-            results[(variant, m["method"], scenario, seed)] = m
-    out = []
-    print("| row | variant | episodes | success | collisions | time (s) | clearance (m) | E_CBF | active (%) | "
-          "QP infeas. (%) | m img (m) | m exec (m) |")
-    print("|:---|:---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        for v in (r.ours, r.alt):
-            ms = [results[(v, r.method, s, seed)] for s in r.scenes for seed in range(args.seeds)]
-            s = summarize(ms)
-            out.append({"row": r.name, "variant": v, "what": r.what, "scenes": r.scenes, **s})
-            print(f"| {r.name} | {v} | {s['episodes']} | {s['success']} | {s['collisions']} | {_f(s['time_s'])} | "
-                  f"{_f(s['clearance_m'])} | {_f(s['e_cbf'])} | {_f(s['active_pct'])} | {_f(s['infeasible_pct'])} | "
-                  f"{_f(s['m_img'], 3)} | {_f(s['m_exec'], 3)} |", flush=True)
+
+    from bigcbf.bench.paper import SCENARIO_ORDER
+    from bigcbf.outputs import check_output_dir, strict_json, write_text
+    vs = variants()
+    known = [v.name for v in vs]
+    if args.only:
+        bad = [n for n in args.only if n not in known]
+        if bad:
+            sys.exit(f"fidelity_ablations: --only: unknown variant {', '.join(bad)} (known: {', '.join(known)})")
+        vs = [v for v in vs if v.name == REFERENCE or v.name in args.only]
+    if args.paper_seeds < 1 or args.worlds_per_family < 1 or args.workers < 1:
+        sys.exit("fidelity_ablations: --paper-seeds, --worlds-per-family and --workers must be at least 1")
+    out = check_output_dir(args.out, "measurement folder")
+    if not args.report_only:
+        worlds = [str(p) for p in dev_worlds(out, args.worlds_per_family)]
+        for v in vs:
+            write_text(out / "configs" / f"{v.name}.toml", config_text(v), "run configuration")
+        t = time.time()
+        for v in vs:
+            cfg = out / "configs" / f"{v.name}.toml"
+            bench(out / v.name / "paper", v, cfg, list(SCENARIO_ORDER), list(range(args.paper_seeds)), args.workers)
+            bench(out / v.name / "dev", v, cfg, worlds, [0], args.workers)
+        print(f"# all benches: {(time.time() - t) / 60:.1f} min", file=sys.stderr)
+    text, rows = table(collect(out, vs), vs)
+    print(text, end="")
+    if args.markdown:
+        write_text(args.markdown, text, "table")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_text(args.json, strict_json(rows, indent=1) + "\n", "JSON rows")
 
 
 if __name__ == "__main__":
