@@ -21,7 +21,7 @@ import numpy as np
 from .control.cbf import CbfFilter
 from .cost import check_episode_cost
 from .control.kernels import goal_distance, in_goal_region
-from .control.methods import filter_params, make_planner
+from .control.methods import METHODS, filter_params, make_planner
 from .control.metrics import EpisodeMetrics
 from .control.planner import PlanInfo
 from .control.prediction import age_obstacles
@@ -123,6 +123,11 @@ class StepRecord:
     scan: object | None
 
 
+#: the largest |u_in| component a planner may return [m/s, rad/s]: 100 times any actuator box a Mecanum base has;
+#: beyond it the filter's arithmetic itself breaks down (a fuzzer's planner returning 1e300 froze the robot silently)
+MAX_COMMAND = 100.0
+
+
 def checked_plan(method: str, out, t: float) -> tuple[np.ndarray, PlanInfo]:
     """A planner's ``plan()`` result ``out`` checked against the protocol (bigcbf/control/planner.py) before the CBF
     filter sees it: a tuple (u_in, info) with u_in 3 finite numbers (vx, vy, wz) and info a PlanInfo (a str mode,
@@ -146,6 +151,10 @@ def checked_plan(method: str, out, t: float) -> tuple[np.ndarray, PlanInfo]:
     if not np.isfinite(u).all():
         raise bad(f"returned a command that is not finite ({_short(u.tolist())}), expected 3 finite numbers "
                   "(vx, vy, wz)")
+    if np.abs(u).max() > MAX_COMMAND:
+        raise bad(f"returned a command of {_short(u.tolist())}: beyond +-{MAX_COMMAND:g} m/s (rad/s) it is no "
+                  "velocity a robot can be asked for (the filter clips to the actuator box; a value this large is "
+                  "a planner's bug)")
     if not isinstance(info, PlanInfo):
         raise bad(f"returned {type(info).__name__} {_short(info)} as its info, expected a "
                   "bigcbf.control.planner.PlanInfo")
@@ -320,6 +329,20 @@ class Episode:
         return age_obstacles(self._obstacles, self.world.t - self._scan_t, 1.0 / self.world.lidar.config.rate_hz,
                              self.params.uncertainty)
 
+    def _plan(self, t, state, obstacles, goal):
+        """The planner's plan(). A user's planner (not a registered method) that raises gets one line naming the
+        method and its error (the traceback stays on the exception's __cause__ for a debugger); a built-in
+        method's exception is a bug of ours and propagates as it is."""
+        try:
+            return self.planner.plan(t, state, obstacles, goal)
+        except UserError:
+            raise
+        except Exception as exc:
+            if self.method in METHODS:
+                raise
+            raise UserError(f"method {self.method!r}: plan() raised {type(exc).__name__}: {str(exc)[:200]} (at t = "
+                            f"{t:.2f} s)") from exc
+
     def act(self, u_in=None) -> StepRecord | None:
         """One control period at the pending control tick: the planner's u_in (or the given one), the common CBF
         filter, the command; then physics up to the next control tick. Returns what the step did."""
@@ -329,7 +352,7 @@ class Episode:
         obs_now = self.obstacles_now()
         if u_in is None:
             goal = self.goal if self.route is None else self.route.local_goal(w.t, state, self.goal)
-            u_in, pinfo = checked_plan(self.method, self.planner.plan(w.t, state, obs_now, goal), w.t)
+            u_in, pinfo = checked_plan(self.method, self._plan(w.t, state, obs_now, goal), w.t)
         else:
             u_in, pinfo = np.asarray(u_in, float), PlanInfo(mode=EXTERNAL, planned=False, planner_ms=0.0)
         u_safe, finfo = self.cbf.filter(state, obs_now, u_in)

@@ -1211,6 +1211,13 @@ SAMPLE_TABLE = [
     ("[stack] eps_g_m = 1e9", "user-error", ""),
     ("record with latency_s = 10", "user-error", ""),
     ("calibrate a log with reversed /cmd_vel times", "ok", ""),   # repaired, with a warning
+    # found by the 1,000-case run (seed 2026) and fixed since: each now a one-line error or a clean run
+    ("replay a log whose /cmd_vel channel has no message", "user-error", ""),
+    ("a planner that raises", "user-error", ""),
+    ("a planner returning 1e300", "user-error", ""),
+    ("50 overlapping floor patches", "ok", ""),
+    ("profile simulate --duration 1e9", "user-error", ""),
+    ("gym time_limit_s = 1e-300", "user-error", ""),
 ]
 
 
@@ -1231,6 +1238,9 @@ def _sample_cases() -> list[Case]:
     for i, t in zip(idx, times):
         msgs[i] = (msgs[i][0], t, t, msgs[i][3])
     reversed_log = _mcap_write(s, msgs)
+    no_cmd = _mcap_write(s, [m for m in msgs if m[0] != "/cmd_vel"])
+    patches = SCEN_OK + "".join("[[floor_patches]]\ncenter = [1.0, 0.0]\nhalf_size = [1.5, 1.5]\nfriction = 0.8\n"
+                                for _ in range(50))
     ped = SCEN_PED.encode()
     C = Case
     return [
@@ -1284,6 +1294,22 @@ def _sample_cases() -> list[Case]:
         C("false_result", "calibrate a log with reversed /cmd_vel times", ["bigcbf", "calibrate", "log.mcap",
                                                                             "--json"],
            {"log.mcap": reversed_log}, expect={"kind": "calibrate", "reordered": True}),
+        C("log", "replay a log whose /cmd_vel channel has no message", ["bigcbf", "replay", "log.mcap", "--json"],
+          {"log.mcap": no_cmd}),
+        C("planner", "a planner that raises", ["bigcbf", "run", "s.toml", "--method", "fzplan:Raises",
+                                                "--time-limit", "1"], {"s.toml": SCEN_OK.encode(), "fzplan.py": PLANNERS}),
+        C("planner", "a planner returning 1e300", ["bigcbf", "run", "s.toml", "--method", "fzplan:Huge",
+                                                    "--time-limit", "1"],
+          {"s.toml": SCEN_OK.encode(), "fzplan.py": PLANNERS}),
+        C("scenario", "50 overlapping floor patches", ["bigcbf", "run", "s.toml", "--json", "--method", "cbf-only",
+                                                        "--time-limit", "1"], {"s.toml": patches.encode()},
+          expect={"kind": "run", "d0": 3.0}),
+        C("cli", "profile simulate --duration 1e9", ["bigcbf", "profile", "simulate", "--robot-profile", "x3_sim",
+                                                      "--out", "p.toml", "--duration", "1e9"], {}, outputs=["p.toml"]),
+        C("gym", "gym time_limit_s = 1e-300", ["python", "case.py"],
+          {"s.toml": ped, "case.py": _script("from bigcbf.gym_env import NavigationEnv\n"
+                                             "env = NavigationEnv(scenario='s.toml', time_limit_s=1e-300)\n"
+                                             "env.reset(seed=0)\nenv.step([0.3, 0, 0])")}),
     ]
 
 

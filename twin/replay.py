@@ -466,6 +466,9 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     notes: list[str] = []
     raw = data
     data, timing, tb_notes = prepare(data, cal_opt.timebase)
+    if len(data.cmd.t) == 0 or len(data.odom.t) == 0:
+        raise UserError(f"nothing to replay: {len(data.cmd.t)} commands ({data.cmd.topic}) and {len(data.odom.t)} "
+                        f"odometry messages ({data.odom.topic}) left after reading the log", file=str(data.path))
     if np.sum(data.odom.t >= data.cmd.t[0]) < 2:
         raise UserError(f"no odometry ({data.odom.topic}) after the first command ({data.cmd.topic}) to compare with",
                         file=str(data.path))

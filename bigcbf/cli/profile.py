@@ -43,6 +43,9 @@ def run(args) -> int:
     if duration < 30.0:
         raise UserError(f"a calibration drive for a stack profile needs at least 30 s, got {duration:g}",
                         field="--duration")
+    from .record import MAX_DURATION_S
+    if duration > MAX_DURATION_S:           # as bigcbf record: 1e9 s ran until killed
+        raise UserError(f"a calibration drive is at most {MAX_DURATION_S:g} s, got {duration:g}", field="--duration")
     from ..outputs import check_distinct, check_output_file
 
     check_distinct({"--robot-profile": robot}, {"--out": out, "--log": args.log})

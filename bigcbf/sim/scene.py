@@ -113,6 +113,9 @@ def compose(spec: SceneSpec) -> mjcf.RootElement:
     if spec.floor_friction is not None:
         root.find("geom", "floor").friction = (spec.floor_friction, 0.005, 0.0001)
     ground = root.find("body", "ground")        # the floor's own body (see scene.xml), so floor patches join it
+    if spec.floor_patches:      # every roller touching overlapping patches is a contact each: room for them (the
+        # arena's size changes no result; 50 overlapping patches overflowed the default 16 MB, a fuzzer's case)
+        root.size.memory = f"{16 + 2 * len(spec.floor_patches)}M"
     for k, p in enumerate(spec.floor_patches):
         _world_geom(ground, ground=True, name=f"floor_patch{k}", type="box", size=(p.half_x, p.half_y, 0.0005),
                     pos=(p.x, p.y, 0.0005), friction=(p.friction, 0.005, 0.0001), priority=2, rgba=p.rgba, group=0)

@@ -138,7 +138,13 @@ class SimWorld:
             if nxt is not None:                        # stop the block where the next command takes effect
                 nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
             w0, g0 = d.qvel[self._wheel_dof].copy(), float(d.sensordata[self._imu_gyro + 2])
-            mujoco.mj_step(m, d, nb)
+            try:
+                mujoco.mj_step(m, d, nb)
+            except mujoco.FatalError as exc:           # the scene asks more of the simulator than it can hold
+                from ..errors import UserError
+                raise UserError(f"MuJoCo stopped at t = {d.time:.3f} s: {str(exc).splitlines()[0]} ({d.ncon} "
+                                "contacts): the scene has more overlapping geometry than the simulator's memory "
+                                "holds; use fewer or non-overlapping floor patches and obstacles") from None
             w1 = d.qvel[self._wheel_dof]
             w_mean = self.encoders.increment(0.5 * (w0 + w1), nb * dt)
             gyro = self.gyro.measure(0.5 * (g0 + float(d.sensordata[self._imu_gyro + 2])), nb * dt)
