@@ -12,7 +12,8 @@ variant's ``[methods.big-cbf-plus]`` table is written to ``DIR/configs/VARIANT.t
 ``DIR/VARIANT/paper`` and the first ``worlds-per-family`` worlds of every family's **dev** split (written to
 ``DIR/worlds/dev/`` exactly as ``bigcbf bench --suite generated`` writes them; never the test split), episode
 seed 0 as that suite runs them, into ``DIR/VARIANT/dev``. A bench resumes what it has already run, so rerunning
-the command finishes an interrupted measurement.
+the command finishes an interrupted measurement, and a larger ``--paper-seeds`` or ``--worlds-per-family`` in the
+same folder runs only the episodes it adds; the table always holds exactly the episodes the arguments name.
 
 It then prints one Markdown table from the benches' ``episodes.csv``: per variant the successes (nine scenes,
 dev worlds, both with the Wilson 95 % interval of ``bigcbf.bench.stats``), the paired difference in success
@@ -150,8 +151,10 @@ def summarize(eps: dict[tuple[str, str, int], dict]) -> dict:
     return out
 
 
-def collect(out: Path, vs: list[Variant]) -> dict[str, dict]:
-    """Variant -> {(set, scenario, seed): episode row} from the benches' episodes.csv."""
+def collect(out: Path, vs: list[Variant], wanted: dict[str, set] | None = None) -> dict[str, dict]:
+    """Variant -> {(set, scenario, seed): episode row} from the benches' episodes.csv; ``wanted`` (set -> the
+    (scenario, seed) keys to keep) leaves out episodes an earlier, larger run of the same folder recorded. A
+    wanted episode that is missing stops the table."""
     data = {}
     for v in vs:
         eps = {}
@@ -159,7 +162,13 @@ def collect(out: Path, vs: list[Variant]) -> dict[str, dict]:
             p = out / v.name / s / "episodes.csv"
             if not p.is_file():
                 raise SystemExit(f"fidelity_ablations: {p} is missing (run without --report-only)")
-            eps.update({(s, *key): r for key, r in read_episodes(p, v.method).items()})
+            got = read_episodes(p, v.method)
+            keys = got.keys() if wanted is None else wanted[s]
+            missing = sorted(set(keys) - set(got))
+            if missing:
+                raise SystemExit(f"fidelity_ablations: {p} lacks {len(missing)} episodes, e.g. {missing[0]} "
+                                 f"(run without --report-only)")
+            eps.update({(s, *key): got[key] for key in keys})
         data[v.name] = eps
     return data
 
@@ -190,7 +199,7 @@ def table(data: dict[str, dict], vs: list[Variant]) -> tuple[str, list[dict]]:
         pd = paired(data[v.name], data[REFERENCE]) if v.name != REFERENCE else None
         rows.append({"variant": v.name, "method": v.method, "switches": v.switches, **s, "paired_vs_plus": pd})
         diff = "–" if pd is None else (f"{pd['diff_pct']:+.1f} [{pd['ci95_pct'][0]:+.1f}, {pd['ci95_pct'][1]:+.1f}], "
-                                       f"p = {pd['mcnemar_p']:.2f} ({pd['b']} only it, {pd['c']} only plus)")
+                                       f"p = {pd['mcnemar_p']:.2g} ({pd['b']} only it, {pd['c']} only plus)")
         lines.append(
             f"| {v.name} | {_ci(s['success_paper'], s['episodes_paper'], s['success_paper_ci95_pct'])} | "
             f"{_ci(s['success_dev'], s['episodes_dev'], s['success_dev_ci95_pct'])} | "
@@ -209,7 +218,8 @@ def main() -> None:
                     help="the first N world seeds of each family's dev split (default 2)")
     ap.add_argument("--only", nargs="+", default=None, metavar="VARIANT",
                     help=f"run and report these variants (and {REFERENCE}, the reference)")
-    ap.add_argument("--report-only", action="store_true", help="run nothing; tabulate the benches in --out")
+    ap.add_argument("--report-only", action="store_true",
+                    help="run nothing; tabulate the episodes these arguments name from the benches in --out")
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON here")
     ap.add_argument("--markdown", type=Path, default=None, help="also write the table here")
     args = ap.parse_args()
@@ -226,8 +236,10 @@ def main() -> None:
     if args.paper_seeds < 1 or args.worlds_per_family < 1 or args.workers < 1:
         sys.exit("fidelity_ablations: --paper-seeds, --worlds-per-family and --workers must be at least 1")
     out = check_output_dir(args.out, "measurement folder")
+    worlds = [str(p) for p in dev_worlds(out, args.worlds_per_family)]
+    wanted = {"paper": {(s, k) for s in SCENARIO_ORDER for k in range(args.paper_seeds)},
+              "dev": {(Path(w).stem, 0) for w in worlds}}
     if not args.report_only:
-        worlds = [str(p) for p in dev_worlds(out, args.worlds_per_family)]
         for v in vs:
             write_text(out / "configs" / f"{v.name}.toml", config_text(v), "run configuration")
         t = time.time()
@@ -236,7 +248,7 @@ def main() -> None:
             bench(out / v.name / "paper", v, cfg, list(SCENARIO_ORDER), list(range(args.paper_seeds)), args.workers)
             bench(out / v.name / "dev", v, cfg, worlds, [0], args.workers)
         print(f"# all benches: {(time.time() - t) / 60:.1f} min", file=sys.stderr)
-    text, rows = table(collect(out, vs), vs)
+    text, rows = table(collect(out, vs, wanted), vs)
     print(text, end="")
     if args.markdown:
         write_text(args.markdown, text, "table")

@@ -84,6 +84,13 @@ def test_the_table_pairs_by_scene_and_seed_not_by_order(fa, tmp_path):
     assert s["active_pct"] == pytest.approx(100 * (0.5 * 300 + 0.1 * 300) / 600)
     assert s["timeouts"] == 1 and rows[0]["paired_vs_plus"] is None
     assert "| no_release_fan | 2/3 [" in text
+    # a smaller sample of the same folder: exactly the episodes asked for, and a missing one stops the table
+    wanted = {"paper": {("a", 0), ("b", 0)}, "dev": {("posts_00000", 0)}}
+    small = fa.collect(tmp_path, vs, wanted)
+    assert set(small["plus"]) == {("paper", "a", 0), ("paper", "b", 0), ("dev", "posts_00000", 0)}
+    assert fa.paired(small["no_release_fan"], small["plus"])["n"] == 3
+    with pytest.raises(SystemExit, match="lacks 1 episodes"):
+        fa.collect(tmp_path, vs, {**wanted, "paper": {("a", 2)}})
 
 
 def test_a_failed_episode_stops_the_table(fa, tmp_path):
