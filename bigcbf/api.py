@@ -42,7 +42,8 @@ __all__ = ["RunConfig", "load_config", "run_episode", "run_bench", "bench_config
 
 def load_config(config: str | Path | RunConfig | None = None, profile: str | Path | None = None, *,
                 base: RunConfig | None = None, notes: Callable[[str], None] | None = None) -> RunConfig:
-    """The run configuration: ``base`` (default: every default, Table I), overlaid with a ``--config`` TOML file
+    """The run configuration: ``base`` (default: ``RunConfig()``, Table I with the twin-calibrated stack profile of
+    the simulated X3, what every front door uses), overlaid with a ``--config`` TOML file
     (or taken as given when ``config`` is a RunConfig), then with a ``--profile`` stack-parameter TOML (a
     calibrated uncertainty profile from ``bigcbf calibrate``) over its ``stack``.
 

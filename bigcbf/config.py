@@ -53,7 +53,12 @@ TABLES = ("stack", "perception", "pedestrians", "methods", "route")
 
 @dataclass(frozen=True)
 class RunConfig:
-    """Everything of a run that is not the scenario, the method's name, the seed or the LiDAR."""
+    """Everything of a run that is not the scenario, the method's name, the seed or the LiDAR.
+
+    ``RunConfig()`` is the one default: ``bigcbf run``/``bench``/``demo``, :func:`bigcbf.run_episode`, the Gymnasium
+    environment and a bare ``Episode(scenario, method, seed)`` all build their episode from it
+    (:meth:`bigcbf.episode.Episode.from_config`), so a scenario, method and seed give one result through every door
+    (tests/test_one_config.py)."""
 
     #: default: Table I with the stack profile the twin calibrated for the simulated X3 (bigcbf profile simulate)
     stack: StackParams = field(default_factory=default_stack_params)

@@ -28,7 +28,7 @@ from .control.prediction import age_obstacles
 from .control.route import RouteLayer, RouteParams
 from .errors import UserError
 from .params.perception import PerceptionParams
-from .params.stack import SIMULATION, StackParams
+from .params.stack import StackParams, default_stack_params
 from .perception.pipeline import Perception
 from .sanity import odometry_check, sensor_check
 from .scenario import Scenario
@@ -195,6 +195,12 @@ class Episode:
     ``method``: a method name (``bigcbf.control.methods``: registered, entry point or ``package.module:Class``),
     or None for an episode whose u_in comes from outside (``act(u_in)``). ``method_params``: the method's own
     parameters (its ``params_type``; default its defaults). :meth:`from_config` takes them all from a RunConfig.
+
+    ``params``: the stack parameters; default (None) those of ``RunConfig()``, Table I overlaid with the
+    twin-calibrated stack profile of the simulated X3 (``default_stack_params()``), which every front door
+    (``bigcbf run``/``bench``/``demo``, :func:`bigcbf.run_episode`, the Gymnasium environment) builds from, so
+    ``Episode(sc, m, seed)`` is ``Episode.from_config(sc, m, seed, RunConfig())``. Pass ``SIMULATION`` for Table I
+    alone (the golden tests and ``bigcbf perf`` do).
     """
 
     @classmethod
@@ -206,13 +212,14 @@ class Episode:
                    method_params=None if method is None else config.method_params(method),
                    route=config.route, **kwargs)
 
-    def __init__(self, scenario: Scenario, method: str | None, seed: int, params: StackParams = SIMULATION,
+    def __init__(self, scenario: Scenario, method: str | None, seed: int, params: StackParams | None = None,
                  perception: str = "lidar", perception_params: PerceptionParams = PerceptionParams(),
                  lidar: LidarConfig | None = None, time_limit_s: float | None = None,
                  pedestrian_params: SocialForceParams = SocialForceParams(), method_params=None,
                  route: RouteParams | None = None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
+        params = default_stack_params() if params is None else params      # RunConfig()'s stack
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
         self.perception_mode = perception
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)

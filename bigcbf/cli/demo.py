@@ -1,5 +1,9 @@
 """bigcbf demo: required sidestepping with CBF-only and BIG-CBF on the same seed, side by side.
 
+Each episode is built from the default run configuration, ``RunConfig()`` (Table I with the twin-calibrated stack
+profile of the simulated X3), as ``bigcbf run``, ``bigcbf bench``, :func:`bigcbf.run_episode` and the Gymnasium
+environment build theirs: the demo's big-cbf row is ``bigcbf run required_sidestepping --method big-cbf --seed S``.
+
 ``bigcbf demo --manoeuvre`` instead drives the bare robot through a scripted manoeuvre (forward, strafe,
 diagonal, spin, arc) and prints commanded against achieved body velocities.
 """
@@ -47,19 +51,29 @@ def run(args) -> int:
     return run_manoeuvre(args) if args.manoeuvre else run_sidestep(args)
 
 
+def demo_episode(method: str, seed: int, config=None, **kwargs):
+    """The demo's episode of ``method`` on ``seed``: DEMO_SCENARIO built from ``config`` (default ``RunConfig()``,
+    the configuration every front door uses); ``kwargs`` as for :meth:`bigcbf.episode.Episode.from_config`."""
+    from ..config import RunConfig
+    from ..episode import Episode
+    from ..scenario import load_scenario
+
+    return Episode.from_config(load_scenario(DEMO_SCENARIO, seed), method, seed,
+                               RunConfig() if config is None else config, **kwargs)
+
+
 def run_sidestep(args) -> int:
     import tempfile
 
-    from ..episode import Episode
-    from ..params.stack import SIMULATION
-    from ..scenario import load_scenario
+    from ..config import RunConfig
     from ..video import EpisodeVideo, side_by_side
 
+    config = RunConfig()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         parts = []
         for method in DEMO_METHODS:
-            ep = Episode(load_scenario(DEMO_SCENARIO, args.seed), method, args.seed, SIMULATION)
+            ep = demo_episode(method, args.seed, config)
             if args.no_video:
                 rows.append(ep.run().metrics())
                 continue
@@ -68,7 +82,7 @@ def run_sidestep(args) -> int:
                 rows.append(ep.run().metrics())
             parts.append(part)
         if parts:
-            n = side_by_side(parts, args.video, fps=1.0 / SIMULATION.T_C_s)
+            n = side_by_side(parts, args.video, fps=1.0 / config.stack.T_C_s)
     keys = ["method", "success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
             "qp_infeasible_ratio", "planner_p95_ms", "cbf_p95_ms"]
     print(f"{DEMO_SCENARIO}, seed {args.seed}")
