@@ -124,7 +124,7 @@ def test_slow_walker_corridor_counts_match_an_independent_recount(tmp_path):
 @pytest.mark.slow
 def test_a_post_field_that_made_big_cbf_flip_sides_is_crossed_with_at_most_one_reversal(tmp_path):
     """Generated world posts_00003 (dev split; `bigcbf scenarios generate posts --seed 3`): staggered rows of round
-    posts. Without the liveness option (speed governor, viability test, release outlook; issue 13) BIG-CBF entered a gap, had every candidate
+    posts. Without the liveness option (big-cbf-plus's speed governor, viability test, release outlook; issue 13) BIG-CBF entered a gap, had every candidate
     rejected by eq:behavior_acceptance (22) short of its narrowest point, fell back to REVERSE and tried again,
     switching sides 14 times, until the time limit. Now it must cross with at most one left/right reversal and no
     collision."""
@@ -133,8 +133,8 @@ def test_a_post_field_that_made_big_cbf_flip_sides_is_crossed_with_at_most_one_r
     f = tmp_path / "posts_00003.toml"
     f.write_text(generate("posts", 3).toml)
     cfg = tmp_path / "run.toml"
-    cfg.write_text("[stack]\nspeed_governor = true\n")        # the liveness option (docs/fidelity.md)
-    res = run_episode(f, "big-cbf", 0, config=cfg)
+    cfg.write_text("[methods.big-cbf-plus]\nspeed_governor = true\n")   # the liveness option (docs/fidelity.md)
+    res = run_episode(f, "big-cbf-plus", 0, config=cfg)
     assert not res.collision
     assert res.side_reversals <= 1 and res.lateral_reversals <= 1
     assert res.success

@@ -84,7 +84,7 @@ def test_methods_lists_every_method_with_its_dataclass_defaults_and_units(capsys
         for key, (text, unit) in rows.items():
             assert _same(_toml(text), getattr(defaults, key)), (name, key, text)
             assert unit, (name, key)        # every shipped parameter states its unit ([-]: dimensionless)
-    assert with_params == 5
+    assert with_params == 6                # the five baselines with parameters and big-cbf-plus's switches
     dwa = _rows(blocks["dwa"])
     assert dwa["acc_xy_mps2"] == ("2.0", "m/s^2") and dwa["n_wz"] == ("1", "-") and dwa["margin_m"][1] == "m"
     assert _rows(blocks["mppi"])["samples"] == ("512", "-")

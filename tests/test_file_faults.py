@@ -287,9 +287,9 @@ def test_every_fault_off_keeps_the_shipped_episodes():
     ("[faults.latency_spikes]\ntimes_s = [1e9]\nduration_s = 1.0\n", "faults.latency_spikes.times_s"),
     ("[faults]\nblanked_sectors_deg = [[0.0, 400.0]]\n", "faults.blanked_sectors_deg"),
     ("[faults]\nblanked_sectors_deg = [[0.0]]\n", "faults.blanked_sectors_deg[0]"),
-    ("[odometry]\nwheel_noise_density_radps_rthz = -0.1\n", "odometry"),
+    ("[odometry]\nwheel_noise_density_radps_rthz = -0.1\n", "odometry.wheel_noise_density_radps_rthz"),
     ("[imu]\ngyro_bias_radps = nan\n", "imu.gyro_bias_radps"),
-    ("[imu]\ngyro_bias_radps = 5.0\n", "imu"),
+    ("[imu]\ngyro_bias_radps = 5.0\n", "imu.gyro_bias_radps"),
 ])
 def test_bad_robot_fault_keys_are_one_line_errors(tmp_path, text, field):
     path = tmp_path / "robot.toml"

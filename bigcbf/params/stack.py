@@ -311,16 +311,16 @@ class PlusRules:
       was.
     """
 
-    in_way_band: bool = True
+    in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
     in_way_margin_m: float = ranged(0.15, 0, 10)  # the band beyond r_R + r_i + d0 (in_way_band) [m]
-    fixed_lookahead: bool = True
+    fixed_lookahead: bool = True  # the relevant obstacle within relevant_range_m (off: v_max N dt) [on/off]
     relevant_range_m: float = ranged(3.0, 0, 100)  # look-ahead for the relevant obstacle (fixed_lookahead) [m]
-    pass_group_reach: bool = True
-    pass_forward_beside: bool = True
-    side_commitment: bool = True
-    release_fan: bool = True
-    release_sideways: bool = True
-    speed_governor: bool = False
+    pass_group_reach: bool = True  # d_pass from the relevant obstacle's group reach (off: d_pass_min) [on/off]
+    pass_forward_beside: bool = True  # PASS forward max(0.85, s_i) beside a lone obstacle (off: 0.85 m) [on/off]
+    side_commitment: bool = True  # the other side must beat the chosen one by threshold + w_sw [on/off]
+    release_fan: bool = True  # the reverse release picked from a fan of 10 velocities (off: the push) [on/off]
+    release_sideways: bool = True  # release from a moving obstacle across its velocity [on/off]
+    speed_governor: bool = False  # the liveness option (bigcbf.control.governor) [on/off]
 
     def __post_init__(self):
         check_field_ranges(self)

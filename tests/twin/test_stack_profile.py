@@ -69,7 +69,7 @@ def test_profile_simulate_cli(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, words", [
     (["--duration", "10"], "at least 30 s"),
-    (["--robot-profile", "nope"], "no robot profile"),
+    (["--robot-profile", "nope"], "no shipped robot profile 'nope'"),
 ])
 def test_profile_simulate_errors(tmp_path, capsys, args, words):
     assert main(["profile", "simulate", "--out", str(tmp_path / "x.toml"), *args]) == 2
