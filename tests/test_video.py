@@ -95,9 +95,10 @@ def _box_pixels(frame, box):
 
 @pytest.mark.parametrize("camera", ["track", "top"])
 def test_the_cyan_path_is_labelled_with_the_steps_mode(camera):
-    """At 8.6 s of required_sidestepping (seed 0) the robot follows GOAL, and the latest imagination's PASS-R path
-    ends where GOAL's does: the track view labelled the cyan path PASS-R. The label at the cyan path's end is the
-    step's mode, drawn in cyan, and no other label covers it."""
+    """Found at 8.6 s of required_sidestepping (seed 0, the former big-cbf, the obstacle then on the goal line): the
+    robot followed GOAL, and the latest imagination's PASS-R path ended where GOAL's did: the track view labelled the
+    cyan path PASS-R. At 3, 6 and 8.6 s the label at the cyan path's end is the step's mode, drawn in cyan, and no
+    other label covers it (whatever the modes are: the scene and big-cbf have changed since)."""
     from bigcbf.api import load_config       # as `bigcbf run` (the default configuration)
     ep = Episode.from_config(load_scenario("required_sidestepping", 0), "big-cbf", 0, load_config(None, None),
                              time_limit_s=8.7)
@@ -134,7 +135,7 @@ def test_the_cyan_path_is_labelled_with_the_steps_mode(camera):
 
         ep.observers.append(observe)
         ep.run()
-    assert len(checked) == 3 and checked[-1] == (8.6, "GOAL")
+    assert [t for t, _ in checked] == [3.0, 6.0, 8.6]
 
 
 class _Terminal(io.StringIO):
