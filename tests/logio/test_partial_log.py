@@ -47,12 +47,19 @@ def test_an_interrupted_run_keeps_a_valid_partial_log(tmp_path, sig):
     proc = subprocess.Popen([sys.executable, "-c", DRIVER, "run", str(scenario), "--log", str(log)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 90
+        tmp = []
         while time.monotonic() < deadline and proc.poll() is None:    # the log opens as the episode starts
-            if out.exists() and list(out.glob(".run.*.tmp.mcap")):
+            tmp = list(out.glob(".run.*.tmp.mcap")) if out.exists() else []
+            if tmp:
                 break
             time.sleep(0.05)
-        time.sleep(2.0)
+        # then wait until control steps are being written (the file grows by 64 KiB chunks of hundreds of steps:
+        # on a loaded machine the first steps can come seconds after the log opens), not a fixed time
+        start = tmp[0].stat().st_size if tmp else 0
+        while time.monotonic() < deadline and proc.poll() is None and tmp and tmp[0].stat().st_size <= start:
+            time.sleep(0.05)
+        time.sleep(0.5)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
