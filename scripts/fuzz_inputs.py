@@ -1218,6 +1218,10 @@ SAMPLE_TABLE = [
     ("50 overlapping floor patches", "ok", ""),
     ("profile simulate --duration 1e9", "user-error", ""),
     ("gym time_limit_s = 1e-300", "user-error", ""),
+    # found by the second 1,000-case run (seed 2027) and fixed since
+    ("replay a log whose /odom channel has no message", "user-error", ""),
+    ("replay a log whose /odom times are shifted by 2^63 ns", "user-error", ""),
+    ("replay --profile whose uncertainty is a number", "user-error", ""),
 ]
 
 
@@ -1239,6 +1243,9 @@ def _sample_cases() -> list[Case]:
         msgs[i] = (msgs[i][0], t, t, msgs[i][3])
     reversed_log = _mcap_write(s, msgs)
     no_cmd = _mcap_write(s, [m for m in msgs if m[0] != "/cmd_vel"])
+    no_odom = _mcap_write(s, [m for m in msgs if m[0] != "/odom"])
+    far = 2 ** 63 - 1 - max(m[1] for m in msgs)
+    shifted = _mcap_write(s, [(m[0], m[1] + far, m[2] + far, m[3]) if m[0] == "/odom" else m for m in msgs])
     patches = SCEN_OK + "".join("[[floor_patches]]\ncenter = [1.0, 0.0]\nhalf_size = [1.5, 1.5]\nfriction = 0.8\n"
                                 for _ in range(50))
     ped = SCEN_PED.encode()
@@ -1310,6 +1317,13 @@ def _sample_cases() -> list[Case]:
           {"s.toml": ped, "case.py": _script("from bigcbf.gym_env import NavigationEnv\n"
                                              "env = NavigationEnv(scenario='s.toml', time_limit_s=1e-300)\n"
                                              "env.reset(seed=0)\nenv.step([0.3, 0, 0])")}),
+        C("log", "replay a log whose /odom channel has no message", ["bigcbf", "replay", "log.mcap", "--json"],
+          {"log.mcap": no_odom}),
+        C("log", "replay a log whose /odom times are shifted by 2^63 ns", ["bigcbf", "replay", "log.mcap", "--json"],
+          {"log.mcap": shifted}),
+        C("stack_profile", "replay --profile whose uncertainty is a number", ["bigcbf", "replay", "d.mcap",
+                                                                             "--profile", "p.toml", "--json"],
+          {"d.mcap": drive, "p.toml": b"uncertainty = 1.0\n"}),
     ]
 
 

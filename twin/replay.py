@@ -60,6 +60,9 @@ from .timebase import prepare
 #: odometry period of a real base; 1e-300 made a replay count windows forever)
 MIN_WINDOW_S = 0.1
 MAX_WINDOW_S = 3600.0
+#: the longest span a replay simulates, from the first command to the last odometry [s] (4 h of robot time: about
+#: 6 min of computing; a log's times shifted by 2^63 ns asked for 292 years and never ended, a fuzzer's case)
+MAX_REPLAY_S = 4 * 3600.0
 
 
 @dataclass(frozen=True)
@@ -469,6 +472,13 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     if len(data.cmd.t) == 0 or len(data.odom.t) == 0:
         raise UserError(f"nothing to replay: {len(data.cmd.t)} commands ({data.cmd.topic}) and {len(data.odom.t)} "
                         f"odometry messages ({data.odom.topic}) left after reading the log", file=str(data.path))
+    span = float(data.odom.t[-1] - data.cmd.t[0])
+    if span > MAX_REPLAY_S or data.odom.t[0] > data.cmd.t[-1] or data.cmd.t[0] > data.odom.t[-1]:
+        raise UserError(f"the commands ({data.cmd.topic}: {data.cmd.t[0]:.6g}-{data.cmd.t[-1]:.6g} s) and the "
+                        f"odometry ({data.odom.topic}: {data.odom.t[0]:.6g}-{data.odom.t[-1]:.6g} s) "
+                        + ("do not overlap in time" if span <= MAX_REPLAY_S else
+                           f"span {span:.3g} s, more than a replay runs ({MAX_REPLAY_S:g} s)")
+                        + ": their times look corrupt or on different clocks", file=str(data.path))
     if np.sum(data.odom.t >= data.cmd.t[0]) < 2:
         raise UserError(f"no odometry ({data.odom.topic}) after the first command ({data.cmd.topic}) to compare with",
                         file=str(data.path))
@@ -720,7 +730,10 @@ def replay_log(path: str | Path, profile: str | Path | ExecutionModel | None = N
 
     execution = profile
     if profile is not None and not isinstance(profile, ExecutionModel):
-        if "execution" not in load_toml(profile).get("uncertainty", {}):
+        unc = load_toml(profile).get("uncertainty", {})
+        if not isinstance(unc, dict):
+            raise UserError(f"expected a table, got {type(unc).__name__}", file=str(profile), field="uncertainty")
+        if "execution" not in unc:
             raise UserError("has no [uncertainty.execution] table (A, d): not a calibrated profile",
                             file=str(profile), field="uncertainty.execution")
         execution = load_stack_params(profile).uncertainty.execution

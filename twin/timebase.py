@@ -189,6 +189,8 @@ def twist_from_poses(t: np.ndarray, pose: np.ndarray, min_span_s: float = 0.06) 
 
 def twist_is_empty(twist: np.ndarray, pose: np.ndarray) -> bool:
     """Whether the odometry messages carry no twist although the pose moves (more than 0.1 m or 0.2 rad)."""
+    if len(pose) == 0:
+        return False
     moved = np.ptp(pose[:, 0]) > 0.1 or np.ptp(pose[:, 1]) > 0.1 or np.ptp(np.unwrap(pose[:, 2])) > 0.2
     return bool(moved and np.all(np.abs(twist) < 1e-9))
 
