@@ -249,15 +249,19 @@ class LogWriter:
                    convert.imagination_markers(t, modes, paths, accepted, selected, self.odom_frame, available))
 
     # --- life cycle ------------------------------------------------------------------------------------------
+    def _finish_file(self) -> None:
+        """Write the MCAP's last chunk, summary and footer, and close the temporary file."""
+        try:
+            self._w.finish()
+        finally:
+            self._fh.close()
+            self._fh = None
+
     def close(self) -> None:
         """Finish the log; it appears at its path only now."""
         if self._fh is not None:
             try:
-                try:
-                    self._w.finish()
-                finally:
-                    self._fh.close()
-                    self._fh = None
+                self._finish_file()
             except OSError as exc:
                 self._file.discard()
                 raise UserError(f"cannot write: {exc.strerror}", file=str(self.path)) from None
@@ -273,11 +277,7 @@ class LogWriter:
         with critical:
             target = partial_path(self._file.target)
             try:
-                try:
-                    self._w.finish()
-                finally:
-                    self._fh.close()
-                    self._fh = None
+                self._finish_file()
                 os.replace(self._file.tmp, target)
             except OSError as exc:
                 self._file.discard()

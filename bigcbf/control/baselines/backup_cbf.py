@@ -74,12 +74,8 @@ class BackupCbfPlanner(ShieldPlanner):
 
     def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray, u_nom: np.ndarray):
         p, bp = self.params, self.backup
-        if len(obstacles) == 0:                       # nothing to avoid: every value is +inf
-            self.last_h_min = None
-            return clip_command(u_nom, self.params), "NOMINAL", None
         K = max(1, int(round(bp.horizon_s / p.dt_s)))
         geo = Geometry(bp.margin_m)
-        u_nom = clip_command(u_nom, p)
         # the backup trajectory from the current state (measured velocity) ...
         pred0 = predict(obstacles, p, K)
         ro0 = rollout(state.p[None], world_velocity(state)[None], state.theta, brake_policy, pred0, p,

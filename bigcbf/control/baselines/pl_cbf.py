@@ -139,12 +139,8 @@ class PlCbfPlanner(ShieldPlanner):
 
     def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray, u_nom: np.ndarray):
         p, pl = self.params, self.pl
-        if len(obstacles) == 0:                       # nothing to avoid: every value is +inf
-            self.last_h_min = None
-            return clip_command(u_nom, self.params), "NOMINAL", None
         K = max(1, int(round(pl.horizon_s / p.dt_s)))
         geo = Geometry(pl.margin_m)
-        u_nom = clip_command(u_nom, p)
         lib = PolicyLibrary(p, pl, goal)
         L = len(lib)
         # V_l from the current state (measured velocity) ...

@@ -36,7 +36,7 @@ import numpy as np
 from ...params.stack import StackParams
 from ...types import Obstacles, RobotState
 from ..behaviors import behavior_command
-from ..planner import PlanInfo, fail_safe
+from ..planner import PlanInfo, clip_command, fail_safe
 from .. import kernels
 from ..kernels import execution_velocity
 from .. import smallqp
@@ -166,7 +166,8 @@ class ShieldPlanner:
 
     def shield(self, state: RobotState, obstacles: Obstacles, goal: np.ndarray,
                u_nom: np.ndarray) -> tuple[np.ndarray, str, np.ndarray | None]:
-        """(u_in, mode, rollout path shown in videos)."""
+        """(u_in, mode, rollout path shown in videos) for ``u_nom`` (the GOAL law's command clipped to the actuator
+        box) with at least one obstacle (:meth:`plan` sends ``u_nom`` itself when there is none)."""
         raise NotImplementedError
 
     @fail_safe
@@ -175,6 +176,9 @@ class ShieldPlanner:
         goal = np.asarray(goal, float).reshape(2)
         if at_goal(state, goal, self.params):
             return np.zeros(3), PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
-        u, mode, path = self.shield(state, obstacles, goal, behavior_command("GOAL", state, obstacles, goal,
-                                                                            self.params))
+        u_nom = clip_command(behavior_command("GOAL", state, obstacles, goal, self.params), self.params)
+        if len(obstacles) == 0:                       # nothing to avoid: every value is +inf, the nominal input
+            self.last_h_min = None
+            return u_nom, PlanInfo("NOMINAL", True, (time.perf_counter() - t0) * 1e3, None)
+        u, mode, path = self.shield(state, obstacles, goal, u_nom)
         return u, PlanInfo(mode, True, (time.perf_counter() - t0) * 1e3, path)
