@@ -98,6 +98,9 @@ def run_episode(scenario, method: str = "big-cbf", seed: int = 0, *, config: str
     :class:`bigcbf.logio.live.LiveWriter` to stream the log's topics to Foxglove (paced at real time).
     ``observers``: callables that receive every control step's :class:`bigcbf.episode.StepRecord`. ``seed``: a
     whole number in [0, 4294967295]; ``time_limit_s``: in (0, 600] s (default: the scenario's).
+
+    Length: the docstring is a third of it; the checks run in the order their errors are reported, before the episode,
+    and the outputs share one try that aborts them all on any error.
     """
     from .control.methods import resolve_method
     from .episode import PERCEPTION_MODES, Episode
@@ -164,7 +167,10 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     Checked as ``bigcbf bench`` checks its options, before anything is written: ``seeds`` a count in [1, 10000]
     or 1 to 10000 seeds in [0, 4294967295]; ``methods`` and ``scenarios`` non-empty lists (None: the default);
     ``workers`` a whole number from 1 to 4 per core (local engine) or to 10000 (Ray). A mistake is a UserError
-    naming the field."""
+    naming the field.
+
+    Length: the option checks in the order their errors are reported, all before the first write (check_bench_out, the
+    suite's files); then the BenchConfig from the checked values."""
     from .bench.engines import ENGINES, ray_available
     from .bench.paper import METHOD_ORDER, ordered
     from .bench.runner import BenchConfig

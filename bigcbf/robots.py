@@ -149,7 +149,10 @@ def _bad(name: str, what: str) -> UserError:
 
 @functools.lru_cache(maxsize=None)
 def robot(name: str = DEFAULT_ROBOT) -> Robot:
-    """The registered robot ``name``, read from its compiled MJCF (once per process)."""
+    """The registered robot ``name``, read from its compiled MJCF (once per process).
+
+    Length: the model's checks in the order their errors are reported, each on the ids the earlier ones found (base and
+    root, the wheels, their rollers), then the Robot built from them."""
     import mujoco
 
     from .sim.truth import outline_from_model

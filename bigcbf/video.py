@@ -118,7 +118,10 @@ class Overlay:
         return img if img is not None and getattr(img, "p", None) is not None else None
 
     def frame(self, rec: StepRecord) -> np.ndarray:
-        """The RGB frame of ``rec`` (H, W, 3) uint8."""
+        """The RGB frame of ``rec`` (H, W, 3) uint8.
+
+        Length: the decorate callback draws the 3-D overlays inside the render call and closes over this frame's locals;
+        the image overlays after it are drawn in order, later ones on top."""
         ts, top = rec.true_state, self.mpp is not None
         z0 = TOP_VIEW_Z if top else 0.0
         obs = rec.obstacles

@@ -314,7 +314,10 @@ def _check_moved(cmd, odom, path: str) -> None:
 
 
 def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions()) -> Calibration:
-    """Calibrate from extracted series (commands and odometry required, scan stamps optional)."""
+    """Calibrate from extracted series (commands and odometry required, scan stamps optional).
+
+    Length: to be split (issue 22): the input checks, the delay alignment, the fits, the warnings and the result are
+    separate stages in one body."""
     path = str(data.path)
     cmd, odom, scan = data.cmd, data.odom, data.scan
     if cmd is None or len(cmd.t) < 2:

@@ -167,7 +167,10 @@ def _lever_grid(axes: np.ndarray, opt: LimitOptions) -> tuple[np.ndarray, bool]:
 
 
 def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions = LimitOptions()) -> StaticFit:
-    """Step 1 of the module docstring on settled samples: aligned commands u (n, 3), measured twists v (n, 3)."""
+    """Step 1 of the module docstring on settled samples: aligned commands u (n, 3), measured twists v (n, 3).
+
+    Length: to be split (issue 22): the alternating search (limit and lever, then A and d) and the significance test of
+    the limit are separate stages."""
     u, v = np.asarray(u, float), np.asarray(v, float)
     axes = np.asarray(axes, bool)
     idx = np.flatnonzero(axes)
@@ -312,7 +315,10 @@ class DynamicProblem:
 
     def simulate(self, cand: Candidates, keep: bool = False):
         """Run the candidates; returns the error per (candidate, block, axis) (C, B, 3), and with ``keep`` also the
-        prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3))."""
+        prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3)).
+
+        Length: one vectorised time-stepping loop over all candidates: its state (x, y, the odometry-average buffer)
+        carries from step to step; the setup above builds the tables the loop reads."""
         C = len(cand)
         st = self.static
         A, d = st.A, st.d
@@ -418,7 +424,10 @@ def _best(err: np.ndarray, axes: np.ndarray) -> tuple[int, np.ndarray]:
 
 def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: int = 0,
                 start: tuple[float, float, float] | None = None) -> DynamicFit:
-    """Step 2 of the module docstring (``start`` = (L, T, a) skips the coarse stages)."""
+    """Step 2 of the module docstring (``start`` = (L, T, a) skips the coarse stages).
+
+    Length: the search stages 1-4 of step 2 in the module docstring, in order; each numbered block narrows the previous
+    block's (L0, T0, a0)."""
     axes = prob.axes
     lags = np.asarray(opt.lags_s)
     acc = np.concatenate([np.geomspace(opt.accel_min, opt.accel_max, 16), [np.inf]])

@@ -55,7 +55,10 @@ MIN_COMMANDED_M = 0.5      # ... once the commanded path is at least this long [
 def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, duration_s: float = 60.0,
                        limits: DriveLimits = DriveLimits()) -> dict:
     """Drive the calibration program on a robot with ``profile``; write the log to ``out`` (module docstring).
-    Returns a summary (messages per topic, duration, the largest distance from the start, the re-centrings)."""
+    Returns a summary (messages per topic, duration, the largest distance from the start, the re-centrings).
+
+    Length: one tick loop writing each topic at its own rate from the same world state, inside the temporary-file try
+    that deletes a partial log on any error."""
     from bigcbf.sim.scene import open_room
     from bigcbf.sim.world import SimWorld
 

@@ -463,7 +463,10 @@ def response_shift(run: ReplayRun, odom: OdomSeries, axes, max_s: float = 0.3, g
 
 def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOptions = ReplayOptions(),
            video: str | Path | None = None, cal_opt: CalibrationOptions = CalibrationOptions()) -> ReplayResult:
-    """Replay with the nominal and the calibrated (and, with opt.fit, the fitted) profiles; optional video."""
+    """Replay with the nominal and the calibrated (and, with opt.fit, the fitted) profiles; optional video.
+
+    Length: to be split (issue 22): the input checks, the choice of the execution model (with its fallbacks) and the
+    runs are separate stages in one body."""
     if data.cmd is None or data.odom is None:
         raise UserError("replay needs commands and odometry", file=str(data.path))
     notes: list[str] = []

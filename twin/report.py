@@ -101,7 +101,10 @@ def _grid(plt, n: int, width: float = 14.0, row_h: float = 3.4, max_cols: int = 
 def figures(cal: Calibration, cmd_t: np.ndarray | None = None,
             cmd_u: np.ndarray | None = None) -> tuple[dict, list[str]]:
     """The report's figures, ({file name: (matplotlib figure, footer lines)}, what was left out and why): a panel
-    per identified axis and per thing to show, never an empty one; a figure with nothing to show is left out."""
+    per identified axis and per thing to show, never an empty one; a figure with nothing to show is left out.
+
+    Length: to be split (issue 22): four figures in numbered blocks that share only the aligned series; each block could
+    be its own function."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -317,7 +320,10 @@ def write_report(cal: Calibration, out_dir: str | Path, cmd_t: np.ndarray | None
 
 def index_page(cal: Calibration, files: list[str], not_ident: list[str], left_out: list[str]) -> str:
     """The report's index (Markdown): what the calibration found and what the terms mean, the figures, what was
-    left out, calibrate's notes."""
+    left out, calibrate's notes.
+
+    Length: one Markdown page's text, mostly the literal rows of its table of terms; splitting it would scatter one
+    document."""
     d, f, b = cal.delay, cal.fit, cal.bound
     pt = cal.tau95_parts()
     ident = [AXES[j] for j in range(3) if f.identified[j]]

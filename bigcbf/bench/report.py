@@ -330,7 +330,10 @@ def _table(header: Sequence[str], lines: Iterable[Sequence[str]], align: str | N
 
 
 def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> str:
-    """summary.md: Table II's columns per method, success per scenario, the paper's numbers beside ours."""
+    """summary.md: Table II's columns per method, success per scenario, the paper's numbers beside ours.
+
+    Length: summary.md's sections in document order, each block one section (the longer ones are already helpers:
+    _paired_lines, _contacts_lines, _fault_sections, _table_ii_lines)."""
     h = "#" * level
     b = summary["bench"]
     methods, scenarios = b["methods"], b["scenarios"]

@@ -65,6 +65,9 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     checked for every seed when there are at most ``CHECK_ALL_SEEDS`` seeds, else for a sample of that size (the
     first half of it, the last seed, and the rest spread evenly), so that planning stays fast; a draw that fails
     for another seed is recorded as that episode's error row when it runs (and the bench exits with status 1).
+
+    Length: the checks run in the order their errors are reported, all before any episode starts (the docstring lists
+    them); then the tasks from the checked values.
     """
     from ..config import RunConfig
     from ..control.methods import make_planner, resolve_method
@@ -255,6 +258,9 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
     ``progress``: a tqdm bar (None: only on a terminal). ``report_only``: run nothing, rebuild the outputs from the
     database. ``episode_fn``: what a worker runs per task (tests inject failures here). ``log``: where the final
     line and error lines go (default: stderr).
+
+    Length: the directory lock, the result database and the progress bar are held in nested with/try-finally scopes that
+    the run and the report share; the on_row callback closes over them.
     """
     from tqdm import tqdm
 

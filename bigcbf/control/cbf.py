@@ -170,7 +170,10 @@ def _interp(x, xs, ys):
 @kernel
 def _rows_kernel(px, py, theta, vx, vy, wz, u0, u1, u2, P, V, cov, r, k, Axy, knots, bounds, ident):
     """The rows of cbf_rows (eq:cbf_condition with eq:shared_barrier and eq:uncertainty_margin), and the plain
-    fault pre-check; see ``cbf_rows``."""
+    fault pre-check; see ``cbf_rows``.
+
+    Length: a numba kernel: one pass over the obstacles computing each one's margin, barrier, row and plain fault check
+    from the same intermediate values; the unpacking of k and the robot's terms sit above the loop."""
     tau, beta, e_zoh, r_robot, d0, kappa, alpha = k[0], k[1], k[2], k[3], k[4], k[5], k[6]
     horizon, d_c = k[7], complex(k[8], k[9])
     max_pos, max_speed, max_radius, max_cov = k[10], k[11], k[12], k[13]

@@ -202,7 +202,10 @@ class OccupancyGrid:
 def _astar(cost, sx, sy, gx, gy):
     """A* over the 8-connected grid of per-cell costs (inf: cannot be entered), from cell (sx, sy) to (gx, gy);
     moving to a neighbour costs its cost times the step length in cells; no diagonal step past an occupied cell.
-    The goal cell can always be entered. Returns the cells (K, 2) from start to goal, or (0, 2) without a path."""
+    The goal cell can always be entered. Returns the cells (K, 2) from start to goal, or (0, 2) without a path.
+
+    Length: a numba kernel holding textbook A* in one piece (the search loop, then the walk back along its parent
+    array), to read against the description above."""
     nx, ny = cost.shape
     n = nx * ny
     g = np.full(n, np.inf)

@@ -105,7 +105,10 @@ def gi_solve(Qd, g, N, b, x, act, lam, nact, max_iter):
 
     Qd (nv,) >= 0, g (nv,), N (nc, nv), b (nc,). x (nv,), act (nv,) int, lam (nv,) and nact: a dual-feasible start
     (updated in place: the solution, its active set and multipliers). Returns (status, nact, iterations) with status
-    OK, INFEASIBLE (no x satisfies N x >= b) or FAILED (the iteration limit, or a singular KKT system)."""
+    OK, INFEASIBLE (no x satisfies N x >= b) or FAILED (the iteration limit, or a singular KKT system).
+
+    Length: a numba kernel: one dual active-set loop whose state (x, act, lam, nact, the active mask) every step updates
+    in place; the primal step and the multiplier-only step end in the same drop of a constraint."""
     nv = Qd.shape[0]
     nc = N.shape[0]
     size = 2 * nv + 1

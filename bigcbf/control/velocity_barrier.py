@@ -98,7 +98,10 @@ def _grade(C0, C1, C2, l, u, lo, hi):
 def velocity_rows(px, py, theta, u0, u1, u2, P, V, D, ids, idx, Axy, d0, d1, tau, v_min, ident, lo, hi):
     """The collision-cone rows (module docstring) of the obstacles ``idx`` (indices into P, V, D, ids) that qualify:
     (C (K, 3), l (K,), owner (K,): the obstacle index of each row), normalized as the distance rows. ``lo``, ``hi``:
-    the actuator box, for the choice of the half-plane."""
+    the actuator box, for the choice of the half-plane.
+
+    Length: a numba kernel: one pass over the obstacles; each row's geometry (the legs, their normals, the cut-off disk)
+    feeds both the nearest half-plane and the fallback choice of a leg."""
     n = idx.shape[0]
     C = np.zeros((n, 3))
     lv = np.zeros(n)

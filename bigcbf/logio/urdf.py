@@ -179,7 +179,10 @@ def robot_description(model, sensor_frames: dict, *, base: str = "base_link",
                       name: str = "rosmaster_x3") -> RobotDescription:
     """The URDF of the robot whose root body is ``base`` in the compiled ``model`` (layout in the module
     docstring). ``sensor_frames``: frame -> (x, y, z, yaw) in the floor-level base_link (``SimWorld.sensor_frames``,
-    what /tf_static publishes)."""
+    what /tf_static publishes).
+
+    Length: one URDF tree built in document order (the base link, each wheel's link and joint, the sensor frames, then
+    the materials moved to the front)."""
     base_id = next((i for i in range(model.nbody) if model.body(i).name == base), None)
     if base_id is None:
         raise ValueError(f"the model has no body {base!r}")

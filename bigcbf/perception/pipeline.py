@@ -121,7 +121,10 @@ class Perception:
         surfaces (a walker beside a post or another walker), and the walkers (dynamic tracks) in an extended
         cluster (walkers side by side, a walker along a wall). Each such track's points (at least min_points)
         become a cluster of their own, marked partly hidden (its arc is cut where the other object begins); the
-        rest stays one cluster. Returns the clusters and their compact flags (``geometry.compact_mask``)."""
+        rest stays one cluster. Returns the clusters and their compact flags (``geometry.compact_mask``).
+
+        Length: to be split (issue 22): finding the clusters that need a split and splitting them are separable
+        steps."""
         pr = self.params
         T = self.tracker
         if len(clusters) == 0 or not np.any(T.confirmed):

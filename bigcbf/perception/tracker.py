@@ -197,7 +197,10 @@ class Tracker:
         the circle model explained the cluster (default all); ``surface``: the cluster's points (k, 2) per
         measurement, kept with the track that takes it (``report``). Returns the indices of the measurements that
         neither updated a track nor started one (a cluster inside a known object's circle whose radius does not
-        match it, e.g. two objects merged into one cluster)."""
+        match it, e.g. two objects merged into one cluster).
+
+        Length: one scan's predict, update, delete, birth and cap in the order the tracks' state must change, all on one
+        association (rows, cols); the update's maths is already in helpers (kf_update, hysteresis_step)."""
         pr = self.params
         z = np.asarray(z, float).reshape(-1, 2)
         m = len(z)

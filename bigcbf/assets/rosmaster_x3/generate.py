@@ -137,7 +137,10 @@ def wheel(b: MecanumBase, name: str, x: float, y: float, sigma: int, phase: floa
 
 
 def robot_xml(b: MecanumBase) -> str:
-    """The robot's MJCF text."""
+    """The robot's MJCF text.
+
+    Length: the MJCF file's text as one f-string template; the length is the document's, and splitting it would scatter
+    one file."""
     ws = wheels(b)
     body = "\n".join(wheel(b, *w) for w in ws)
     actuators = "\n".join(f'    <velocity name="{w[0]}_wheel" joint="{w[0]}_wheel" class="wheel"/>' for w in ws)
