@@ -487,26 +487,19 @@ WEIRD_VALUES = st.one_of(
     st.lists(st.floats(-1e3, 1e3), max_size=4))
 
 
-def _leaves(node, path=()):
-    if isinstance(node, dict):
-        for k, v in node.items():
-            yield from _leaves(v, path + (k,))
-    elif isinstance(node, list) and node and not all(isinstance(x, (int, float)) for x in node):
-        for i, v in enumerate(node):
-            yield from _leaves(v, path + (i,))
-    yield path
+def _fuzzer():
+    """scripts/fuzz_inputs.py (the real-work fuzzer), whose TOML-tree helpers this stand-in fuzzer shares."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("fuzz_inputs", Path(__file__).resolve().parents[1] / "scripts"
+                                                  / "fuzz_inputs.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("fuzz_inputs", mod)
+    spec.loader.exec_module(mod)
+    return mod
 
 
-def _set(node, path, value):
-    for k in path[:-1]:
-        node = node[k]
-    node[path[-1]] = value
-
-
-def _delete(node, path):
-    for k in path[:-1]:
-        node = node[k]
-    del node[path[-1]]
+_FZ = _fuzzer()
+_leaves, _parent = _FZ._leaves, _FZ._parent
 
 
 @st.composite
@@ -521,21 +514,17 @@ def mutated(draw, base: dict):
         path = draw(st.sampled_from(paths)) if paths else None
         if path is None:
             doc[draw(st.text(min_size=1, max_size=6))] = draw(WEIRD_VALUES)
-        elif op == "set":
-            _set(doc, path, draw(WEIRD_VALUES))
+            continue
+        parent = _parent(doc, path)
+        if op == "set":
+            parent[path[-1]] = draw(WEIRD_VALUES)
         elif op == "delete":
-            _delete(doc, path)
+            del parent[path[-1]]
         elif op == "add":
-            parent = doc
-            for k in path[:-1]:
-                parent = parent[k]
             if isinstance(parent, dict):
                 parent[draw(st.sampled_from(["x", "radius", "seed", "file", "name", "waypoints"]))] = \
                     draw(WEIRD_VALUES)
         else:
-            parent = doc
-            for k in path[:-1]:
-                parent = parent[k]
             leaf = parent[path[-1]]
             if isinstance(leaf, list) and leaf:
                 parent[path[-1]] = leaf * draw(st.sampled_from([2, 50, 300]))
