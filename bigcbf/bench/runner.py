@@ -170,8 +170,10 @@ class _DirLock:
 
 #: what a bench leaves in --out before its database holds anything (a bench stopped at its start): not the user's
 _START_REMNANTS = frozenset({".bench.lock", DB_NAME, DB_NAME + "-wal", DB_NAME + "-shm", DB_NAME + "-journal"})
-#: the folders where the generated and faults suites write their scenario files before the bench starts
-SUITE_FOLDERS = ("worlds", "faults")
+def _suite_folders() -> set[str]:
+    """The folders where suites write their scenario files before the bench starts (each suite's ``folder``)."""
+    from .suites import SUITES
+    return {SUITES.get(n).folder for n in SUITES.names()} - {""}
 
 
 def _suite_folder(folder: Path) -> bool:
@@ -233,7 +235,7 @@ def check_bench_out(out: str | Path, inputs=()) -> None:
         rel = os.path.relpath(os.path.realpath(p), real_out)
         if not rel.startswith(os.pardir):
             held.add(rel.split(os.sep)[0])
-    held |= {f for f in SUITE_FOLDERS if f in entries and _suite_folder(out / f)}
+    held |= {f for f in _suite_folders() if f in entries and _suite_folder(out / f)}
     other = sorted(entries - _START_REMNANTS - held)
     if other:
         shown = ", ".join(other[:3]) + (", ..." if len(other) > 3 else "")

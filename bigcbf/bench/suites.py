@@ -46,6 +46,9 @@ class Suite:
     #: the names of the splits its entries belong to, or a function that tells them (read when asked, e.g. the
     #: splits of the world families registered now); () for a suite without splits
     split_names: tuple[str, ...] | Callable[[], tuple[str, ...]] = ()
+    #: the folder of the bench's --out where ``entries`` writes the suite's scenario files ("" when it writes none):
+    #: a bench --out holding only such files is still a fresh bench's (bigcbf.bench.runner.check_bench_out)
+    folder: str = ""
 
     @property
     def splits(self) -> tuple[str, ...]:
@@ -77,7 +80,7 @@ def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
 SUITES.add(Suite(
     "generated", "procedural worlds (bigcbf/worlds/, one module per family): every registered family at the seeds of "
     "each of its splits, written to DIR/worlds/<split>/, one seed each", _generated, default_seeds=1,
-    split_names=worlds.split_names))
+    split_names=worlds.split_names, folder="worlds"))
 
 
 def _hardware(out: Path) -> list[SuiteEntry]:
@@ -114,7 +117,7 @@ SUITES.add(Suite(
     "faults", f"every method under each fault of bigcbf/bench/faults.py ({', '.join(faults.FAULTS)}), at each level "
     f"({', '.join(faults.LEVELS)}), on shipped scenes where each matters, beside the same scenes without the fault "
     "(split and family none); files written to DIR/faults/", _faults, default_seeds=5,
-    split_names=(faults.REFERENCE, *faults.LEVELS)))
+    split_names=(faults.REFERENCE, *faults.LEVELS), folder="faults"))
 
 
 def _francis2023(out: Path) -> list[SuiteEntry]:
