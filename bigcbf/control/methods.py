@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import inspect
 import time
 from functools import lru_cache
 from typing import Any, Callable
@@ -153,6 +154,25 @@ def method_params_type(name: str) -> type | None:
     return getattr(resolve_method(name), "params_type", None)
 
 
+def _call_factory(name: str, factory: Callable, args: tuple):
+    """``factory(*args)``; a user's factory (not a registered method) that cannot be called so, or that raises,
+    is a UserError naming the method, not a traceback from inside the episode. A registered method's exception
+    is a bug of ours and propagates."""
+    if name in METHODS:
+        return factory(*args)
+    try:
+        inspect.signature(factory).bind(*args)
+    except TypeError as exc:
+        call = "factory(params, method_params)" if len(args) == 2 else "factory(params)"
+        raise UserError(f"method {name!r}: its factory cannot be called as {call} ({exc})") from None
+    except ValueError:               # no signature to inspect (a builtin): let the call decide
+        pass
+    try:
+        return factory(*args)
+    except Exception as exc:         # noqa: BLE001 - the user's code, reported in one line
+        raise UserError(f"method {name!r}: its factory raised {type(exc).__name__}: {str(exc)[:200]}") from None
+
+
 def make_planner(name: str, params: StackParams, method_params: Any = None) -> Planner:
     """A new planner of method ``name`` with the stack parameters and (methods with a ``params_type``) its own
     parameters (default: the dataclass's defaults). The result must implement the Planner protocol."""
@@ -161,13 +181,13 @@ def make_planner(name: str, params: StackParams, method_params: Any = None) -> P
     if ptype is None:
         if method_params is not None:
             raise UserError(f"method {name!r} takes no parameters of its own (its factory has no params_type)")
-        planner = factory(params)
+        planner = _call_factory(name, factory, (params,))
     else:
         if method_params is None:
             method_params = ptype()
         elif not isinstance(method_params, ptype):
             raise TypeError(f"method {name!r} takes {ptype.__name__}, got {type(method_params).__name__}")
-        planner = factory(params, method_params)
+        planner = _call_factory(name, factory, (params, method_params))
     missing = [a for a in ("reset", "plan") if not callable(getattr(planner, a, None))]
     if missing:
         raise UserError(f"method {name!r}: {type(planner).__name__} is not a planner (no {', '.join(missing)}; "
