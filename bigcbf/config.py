@@ -22,7 +22,10 @@ defaults, or the ``base`` given to :func:`load_run_config`)::
     enabled = true          # the robot's scans, an A* path, its look-ahead point as the method's goal); off by
     lookahead_m = 1.5       # default (the paper's set-up); ``bigcbf run/bench --route on`` sets enabled
 
-BIG-CBF, BIG-CBF-NoShared and CBF-only have no table of their own: their parameters are the stack's. Unknown
+BIG-CBF, BIG-CBF-NoShared and CBF-only have no table of their own: their parameters are the stack's. A method's
+``[methods.NAME.stack]`` table (any method, e.g. ``[methods.big-cbf.stack]``) lays stack keys over ``[stack]`` for
+that method's episodes only (its planner and its filter), so one file can hold each method's tuned stack keys
+(``bigcbf tune``, docs/tuning.md); :meth:`RunConfig.stack_for` gives the result. Unknown
 tables and keys, values of the wrong type or out of range are a UserError naming the file and the field
 (``methods.dwa.n_xy``). The LiDAR and the robot profile are not part of this file (the scenario file holds the
 robot profile).
@@ -69,6 +72,14 @@ class RunConfig:
     methods: dict[str, Any] = field(default_factory=dict)
     #: the route layer (bigcbf/control/route.py) under every method; off by default (the paper's set-up)
     route: RouteParams = RouteParams()
+    #: method name -> its stack keys over ``stack`` (a partial StackParams table, ``[methods.NAME.stack]``)
+    method_stacks: dict[str, dict] = field(default_factory=dict)
+
+    def stack_for(self, method: str | None) -> StackParams:
+        """The stack parameters of ``method``'s episodes: ``stack`` with its ``[methods.NAME.stack]`` keys."""
+        over = self.method_stacks.get(method) if method is not None else None
+        return self.stack if not over else from_dict(StackParams, _merge(to_dict(self.stack), over),
+                                                     prefix=f"methods.{method}.stack")
 
     def method_params(self, method: str) -> Any:
         """The parameters of ``method`` (None for a method without a ``params_type``)."""
@@ -101,7 +112,7 @@ def run_config_from_dict(data: dict, *, file: str | None = None, base: RunConfig
                      ("route", RouteParams)):
         if key in data:
             parts[key] = from_dict(cls, _merge(to_dict(getattr(base, key)), data[key]), file=file, prefix=key)
-    methods = dict(base.methods)
+    methods, stacks = dict(base.methods), dict(base.method_stacks)
     for name, table in data.get("methods", {}).items():
         where = f"methods.{name}"
         if not isinstance(table, dict):
@@ -110,14 +121,30 @@ def run_config_from_dict(data: dict, *, file: str | None = None, base: RunConfig
             ptype = method_params_type(name)
         except UserError as err:
             raise UserError(err.message, file=file, field=where) from None
+        if "stack" in table:
+            stacks[name] = _method_stack(table["stack"], stacks.get(name, {}), parts.get("stack", base.stack),
+                                         file, f"{where}.stack")
+            table = {k: v for k, v in table.items() if k != "stack"}
+            if not table:
+                continue
         if ptype is None:
-            raise UserError(f"method {name!r} has no parameters of its own (BIG-CBF's are in [stack])",
-                            file=file, field=where)
+            raise UserError(f"method {name!r} has no parameters of its own (BIG-CBF's are in [stack], or in "
+                            f"[methods.{name}.stack] for its episodes only)", file=file, field=where)
         start = to_dict(methods[name]) if name in methods else {}
         methods[name] = from_dict(ptype, _merge(start, table), file=file, prefix=where)
     return RunConfig(stack=parts.get("stack", base.stack), perception=parts.get("perception", base.perception),
                      pedestrians=parts.get("pedestrians", base.pedestrians), methods=methods,
-                     route=parts.get("route", base.route))
+                     route=parts.get("route", base.route), method_stacks=stacks)
+
+
+def _method_stack(table, start: dict, stack: StackParams, file: str | None, where: str) -> dict:
+    """A method's ``[methods.NAME.stack]`` table over ``start`` (its earlier one), checked as stack keys over
+    ``stack`` (errors name the file and ``methods.NAME.stack.KEY``)."""
+    if not isinstance(table, dict):
+        raise UserError(f"expected a table of stack keys, got {table!r}", file=file, field=where)
+    over = _merge(start, table)
+    from_dict(StackParams, _merge(to_dict(stack), over), file=file, prefix=where)
+    return over
 
 
 def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfig:
@@ -136,6 +163,9 @@ def config_dict(config: RunConfig) -> dict:
             methods[name] = to_dict(config.methods.get(name, ptype()))
     for name, params in config.methods.items():
         methods[name] = to_dict(params)
+    for name, over in config.method_stacks.items():     # only when given: the keys of other files do not change
+        if over:
+            methods[name] = {**methods.get(name, {}), "stack": over}
     out = {"stack": to_dict(config.stack), "perception": to_dict(config.perception),
            "pedestrians": to_dict(config.pedestrians), "methods": dict(sorted(methods.items()))}
     if config.route != RouteParams():
