@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .control.cbf import CbfFilter
+from .control.encounters import NO_SIDES, EncounterSideRecorder
 from .cost import check_episode_cost
 from .control.kernels import goal_distance, in_goal_region
 from .control.methods import METHODS, filter_params, make_planner
@@ -82,6 +83,10 @@ class EpisodeResult:
     side_reversals: int = 0         # left/right reversals of the mode history (PASS/SIDE -L vs -R)
     lateral_reversals: int = 0      # left/right reversals of the command's lateral component (every method)
     no_progress_s: float = 0.0      # time in 2 s windows that brought the robot < 0.1 m closer to the goal
+    # side switches per encounter (bigcbf/control/encounters.py defines them); None for methods without sided modes
+    encounters: int | None = None
+    encounter_side_switches: int | None = None
+    switches_per_encounter: float | None = None
     # the shared-uncertainty ablation's diagnostics (Sec. IV-C): E_CBF of the steps whose QP was infeasible, and the
     # margins kappa_l m_i (eq:shared_barrier (20)) each layer used, mean and 90th percentile over the episode [m]: the
     # imagination's over the selected rollout's steps and obstacles at each selection (BIG-CBF variants; NoShared: its
@@ -279,6 +284,8 @@ class Episode:
         self._limit = int(round(self.time_limit_s / w.dt))
         self._k = 0
         self.metrics = EpisodeMetrics.for_params(self.params)     # every metric of the episode goes through it
+        self._sides = (EncounterSideRecorder(self.params) if getattr(self.planner, "sided_modes", False)
+                       else None)                                 # switches per encounter (control/encounters.py)
         self._collision = self._success = False
         self._obstacles, self._scan, self._scan_t, self._scanned = Obstacles.empty(), None, 0.0, -1
         self.state: RobotState | None = None       # the stack's state at the pending control tick
@@ -366,6 +373,8 @@ class Episode:
         w.command(u_safe)
         ts = w.true_state()
         self.metrics.control_step(w.t, state, ts, self.goal, u_in, u_safe, pinfo, finfo)
+        if self._sides is not None and pinfo.mode != EXTERNAL:
+            self._sides.add(w.t, state, obs_now, goal, pinfo.mode)
         if self.peds.k:                                   # near misses with people (sim/contacts.py)
             self.metrics.near_miss(*near_miss(self.truth.distance, (ts.px, ts.py, ts.theta), _world_velocity(ts),
                                               self.walkers.positions(), self.walkers.velocities), PERSONAL_SPACE_M)
@@ -422,7 +431,8 @@ class Episode:
             collision=self._collision, timeout=self.done and not (self._success or self._collision),
             time_s=round(w.t, 4), final_goal_dist_m=float(np.hypot(ts.px - self.goal[0], ts.py - self.goal[1])),
             sim_time_s=round(w.t, 4), wall_time_s=time.perf_counter() - self._wall0,
-            perception=self.perception_mode, warnings=warnings, **self.metrics.results(w.t))
+            perception=self.perception_mode, warnings=warnings, **self.metrics.results(w.t),
+            **(NO_SIDES if self._sides is None else self._sides.metrics()))
 
     def run(self) -> EpisodeResult:
         """The whole episode: :meth:`begin`, then :meth:`act` until done."""
@@ -436,6 +446,7 @@ class Episode:
 DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearance_m", "e_cbf", "cbf_active_ratio",
                       "qp_infeasible_ratio", "stopped_time_s", "final_goal_dist_m", "sim_time_s", "control_steps",
                       "perception_faults", "mode_history", "mode_switches_per_min", "side_reversals",
-                      "lateral_reversals", "no_progress_s", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
+                      "lateral_reversals", "no_progress_s", "encounters", "encounter_side_switches",
+                      "switches_per_encounter", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
                       "m_exec_mean_m", "m_exec_p90_m", "missed_scans", "contact", "at_fault_collision",
                       "passive_collision", "min_time_to_contact_s", "personal_space_s")

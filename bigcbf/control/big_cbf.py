@@ -17,6 +17,8 @@ import numpy as np
 from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
+from .encounters import EncounterTracker
+from .executed_speed import judge_at_executed_speed, speed_params
 from .governor import GOVERNED_MODES, govern_command
 from .imagination import Imagination, choose_release, imagine
 from .planner import PlanInfo, clip_command, fail_safe
@@ -56,10 +58,18 @@ class BigCbfPlanner:
         self.rules = rules
         self.name = "big-cbf" if shared else "big-cbf-noshared"
         self.selector = BehaviorSelector(params, rules)
+        # the rule encounter_commitment (big-cbf-plus): the obstacle being passed, across selections (encounters.py)
+        self.encounters = EncounterTracker(params, rules) if rules.encounter_commitment else None
         self.reset(0)
+
+    #: PASS-L/SIDE-L and PASS-R/SIDE-R are sided modes: episodes report switches per encounter (encounters.py)
+    sided_modes = True
 
     def reset(self, seed: int) -> None:
         self.selector.reset()
+        if self.encounters is not None:
+            self.encounters.reset()
+        self._speed_params = self.params     # the selected mode's speed limits (rule executed_speed)
         self._next_t: float | None = None
         self._path: np.ndarray | None = None
         self._release_v: np.ndarray | None = None
@@ -76,7 +86,14 @@ class BigCbfPlanner:
         eq:behavior_acceptance (22), eq:analytic_workload (24)): imagine, score, select; keeps only the mode."""
         p = self.params
         img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode, rules=self.rules)
-        sel = self.selector.select(t, img)
+        scale = None
+        if self.rules.executed_speed:          # rejected candidates judged again at slower speeds (executed_speed.py)
+            img, scale = judge_at_executed_speed(img, state, obstacles, goal, p, shared=self.shared,
+                                                 current=self.selector.mode, rules=self.rules)
+        enc = None if self.encounters is None else self.encounters.update(t, state.p, goal, obstacles)
+        sel = self.selector.select(t, img, enc)
+        self._speed_params = (p if scale is None or sel.mode not in img.modes
+                              else speed_params(p, float(scale[img.index(sel.mode)])))
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
             self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared,
                                                         rules=self.rules)
@@ -101,8 +118,9 @@ class BigCbfPlanner:
                 nxt += self.params.T_B_s
             self._next_t = nxt
         mode = self.selector.mode
-        u = clip_command(behavior_command(mode, state, obstacles, goal, self.params, release_v=self._release_v,
-                                          rules=self.rules), self.params)  # eq:online_behavior_command (8)
+        u = clip_command(behavior_command(mode, state, obstacles, goal, self._speed_params,
+                                          release_v=self._release_v, rules=self.rules),
+                         self.params)  # eq:online_behavior_command (8)
         if self.rules.speed_governor and mode in GOVERNED_MODES:
             u = govern_command(state, obstacles, u, self.params)[0]                           # governor.py
         return u, PlanInfo(mode=mode, planned=planned, planner_ms=(time.perf_counter() - t0) * 1e3, path=self._path,

@@ -54,6 +54,14 @@ class BehaviorSelector:
     (:attr:`bigcbf.control.imagination.Imagination.viable`): it is not retained, and when no candidate is left the
     reverse-release fallback is invoked, as when all are rejected. YIELD is exempt (standing still is what it does). Rules 1-4 read "viable" for "accepted".
     This is part of the rule ``PlusRules.speed_governor``; without it "viable" is "accepted".
+
+    Encounter commitment (a rule of ours, ``PlusRules.encounter_commitment``, off in ``big-cbf``;
+    ``bigcbf.control.encounters``): ``select`` is given the current encounter. While it is committed to a side, the
+    opposite side's modes are not viable (rules 1-4 choose among the rest: that side, GOAL, YIELD, else the
+    fallback), unless every candidate on the committed side has failed eq:behavior_acceptance (22) at
+    ``commit_release_selections`` consecutive selections, which releases the commitment. The first sided mode
+    selected during an encounter commits it. While an encounter is current, the side commitment above takes its
+    side from the encounter (none for an uncommitted one), not from the last sided mode.
     """
 
     def __init__(self, params: StackParams, rules: PlusRules = PAPER_RULES):
@@ -81,9 +89,27 @@ class BehaviorSelector:
             return img.modes[best]
         return img.modes[k]
 
-    def select(self, t: float, img: Imagination) -> Selection:
+    def _encounter_viable(self, img: Imagination, acc: np.ndarray, enc) -> np.ndarray:
+        """The encounter commitment (class docstring): ``acc`` without the committed encounter's opposite side;
+        counts the selections at which its own side failed eq:behavior_acceptance (22) and releases it after K."""
+        side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+        if enc.side != 0:
+            if (np.asarray(img.accepted) & (side == enc.side)).any():
+                enc.blocked = 0
+            else:
+                enc.blocked += 1
+            if enc.blocked >= self.rules.commit_release_selections:
+                enc.side, enc.blocked = 0, 0
+        self.side = float(enc.side)
+        return acc & (side != -enc.side) if enc.side != 0 else acc
+
+    def select(self, t: float, img: Imagination, encounter=None) -> Selection:
+        """One selection (class docstring); ``encounter``: the current encounter
+        (:class:`~bigcbf.control.encounters.Encounter`) under the rule ``encounter_commitment``, else None."""
         p = self.params
         acc = img.viable
+        if encounter is not None and self.rules.encounter_commitment:
+            acc = self._encounter_viable(img, acc, encounter)
         prev = self.mode
         if not acc.any():
             sel = Selection(REVERSE, "fallback", prev != REVERSE)
@@ -109,6 +135,8 @@ class BehaviorSelector:
         self.mode = sel.mode
         if sel.mode in MODE_INDEX and SIGMA[MODE_INDEX[sel.mode]] != 0:
             self.side = float(SIGMA[MODE_INDEX[sel.mode]])
+            if encounter is not None and self.rules.encounter_commitment and encounter.side == 0:
+                encounter.side = int(self.side)
         elif sel.mode == "GOAL":
             self.side = 0.0
         return sel

@@ -309,6 +309,15 @@ class PlusRules:
     - ``speed_governor``: the liveness option (``bigcbf.control.governor``: GOAL/PASS/SIDE at the speed a model of
       the common CBF admits, with the selection's viability test and the release outlook). Off by default, as it
       was.
+    - ``encounter_commitment`` (issue 25): the passing side is kept per encounter (``bigcbf.control.encounters``:
+      an obstacle's group being passed, joined across changing track ids) until the encounter is behind the robot
+      or every candidate on its side fails ``eq:behavior_acceptance`` (22) at ``commit_release_selections``
+      consecutive selections; the opposite side's modes are no candidates meanwhile (off: ``side_commitment``
+      alone).
+    - ``executed_speed`` (issue 25): a candidate that ``eq:behavior_acceptance`` (22) rejects at its speed limit is
+      imagined again at the slower speeds the filter would let it have near obstacles, over the same look-ahead
+      distance (the horizon lengthened as the speed falls), and runs at the fastest speed that passes
+      (``bigcbf.control.executed_speed``; off: every candidate judged at v_b^max only).
     """
 
     in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
@@ -321,6 +330,9 @@ class PlusRules:
     release_fan: bool = True  # the reverse release picked from a fan of 10 velocities (off: the push) [on/off]
     release_sideways: bool = True  # release from a moving obstacle across its velocity [on/off]
     speed_governor: bool = False  # the liveness option (bigcbf.control.governor) [on/off]
+    encounter_commitment: bool = True  # keep the passing side per encounter (control/encounters.py) [on/off]
+    commit_release_selections: int = ranged(3, 1, 100)  # K: selections with the side infeasible before release [-]
+    executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
 
     def __post_init__(self):
         check_field_ranges(self)
