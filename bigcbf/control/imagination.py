@@ -32,9 +32,11 @@ import numpy as np
 
 from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
-from .behaviors import BEHAVIORS, REVERSE, PolicyData, goal_basis, mode_indices, mode_rows, release_velocity
+from .behaviors import (BEHAVIORS, REVERSE, PolicyData, _policy_rows, goal_basis, mode_indices, mode_rows,
+                        release_velocity)
 from .faults import perception_fault
 from .governor import GOVERNED_MODES, govern_c, obstacle_sigma_term
+from .jit import kernel
 from .prediction import predict_obstacles, q_sigma_for
 from . import kernels
 from .uncertainty import has_dynamic, kappa_img
@@ -181,11 +183,30 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
                               rows=K.rows, rules=rules)      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
     p, th = ((np.full(B, complex(state.px, state.py)), np.full(B, float(state.theta))) if start is None
              else (np.array(start[0], complex), np.array(start[1], float)))   # one start state per row
-    rot = np.exp(1j * th)
-    conj_rot = np.conj(rot)
     # (N+1, B) layouts: one contiguous row per step; row N of V and U repeats row N-1
     Pk, Vk, Uk, THk = (np.empty((N + 1, B), complex), np.empty((N + 1, B), complex), np.empty((N + 1, B), complex),
                        np.empty((N + 1, B)))
+    if governed is None and not rules.speed_governor and not policy.push and ideal_xy and not turning:
+        # the usual case (nominal execution model, no governor): the loop compiled, the products after it
+        _rollout_loop(policy.kind, policy.coef, policy.goal, np.ascontiguousarray(Ok), policy.obs_r, policy.groups,
+                      policy.alone, policy.release, policy.geometry, np.array(p, complex), N, dt, Pk, Vk)
+        THk[:] = th
+        Uk[:N] = Vk[:N] * np.conj(np.exp(1j * th))       # u_k = R(theta)^T v_k, the yaw constant
+        Uk[N] = u = Uk[N - 1]
+        Vk[N] = kernels.execution_velocity_c(np.exp(1j * th), u, a_c, b_c, d_c)
+        return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, None)
+    along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk)
+    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
+
+
+def _rollout_steps(policy: PolicyData, governed, Ok, Oc, p, th, N: int, dt: float, K: _Constants,
+                   rules: PlusRules, Pk, Vk, Uk, THk):
+    """The loop of :func:`_rollout` step by step in numpy (the speed governor, the push, or progress along the
+    maneuver): fills Pk, Vk, Uk, THk (N+1, B); returns ``along`` (None without the rule ``speed_governor``)."""
+    a_c, b_c, d_c, ideal_xy, a20, a21, dw, turning = K.a_c, K.b_c, K.d_c, K.ideal_xy, K.a20, K.a21, K.dw, K.turning
+    B = K.B
+    rot = np.exp(1j * th)
+    conj_rot = np.conj(rot)
     THk[:] = th
     # progress along the maneuver: only the liveness option's viability test reads it (Imagination.along)
     along = np.zeros(B) if rules.speed_governor else None
@@ -213,7 +234,27 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Pk[N] = p
     Uk[N] = u = Uk[N - 1]
     Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)       # u_{N-1} realized at the terminal yaw
-    return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
+    return along
+
+
+@kernel
+def _rollout_loop(kind, coef, goal, Ok, obs_r, groups, alone, release, geo, p, N, dt, Pk, Vk):
+    """The loop of :func:`_rollout` compiled for the nominal execution model A = I, d = 0 (eq:behavior_rollout
+    (12), eq:execution (1)): at each step k the policy of every row (``behaviors._policy_rows``, the kernel
+    :meth:`PolicyData.velocity` runs) from the imagined positions ``p`` (B,) and the predicted obstacles Ok[k],
+    then the Euler step p + dt v; fills Pk[0..N] and Vk[0..N-1] (N+1, B). The complex products that do not feed
+    back (u = R^T v) are left to numpy, whose complex multiply (fused on CPUs with FMA) is not the plain formula
+    compiled code would use: so the rollout is the numpy step loop's bits (tests/control/test_imagination_compiled.py)."""
+    B = p.shape[0]
+    v = np.empty(B, np.complex128)
+    for k in range(N):
+        _policy_rows(kind, coef, p, goal, Ok[k], obs_r, groups, alone, release, geo, v)
+        for b in range(B):
+            Pk[k, b] = p[b]
+            Vk[k, b] = v[b]
+            p[b] = p[b] + dt * v[b]
+    for b in range(B):
+        Pk[N, b] = p[b]
 
 
 def rollout_paths(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
@@ -304,33 +345,64 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
         return np.full(B, np.inf), np.zeros(B), np.zeros(B), np.zeros((B, N + 1, 0))
     Pc, Vc, TH, Oc, cov = ro.P, ro.V, ro.TH, ro.Oc, ro.cov
     Ov = obstacles.v[:, 0] + 1j * obstacles.v[:, 1]                   # (M,)
-    q = Pc[:, :, None] - Oc[None]                                      # q_i = p - p_i (B, N+1, M)
-    q2 = q.real ** 2 + q.imag ** 2
-    relv = Vc[:, :, None] - Ov                                         # R(A u + d) - v_i
     if shared:
         kap = kappa_img(obstacles, unc)
-        m = kernels.uncertainty_radius(np.abs(relv), kernels.prediction_term(cov, unc)[None],
-                                       kernels.e_exec_speed(speed, ex)[:, :, None], unc)   # eq:uncertainty_margin
-        margin = kap * m
+        rel_speed = np.abs(Vc[:, :, None] - Ov)                        # ||R(A u + d) - v_i|| (numpy's complex abs)
+        pred = kernels.prediction_term(cov, unc)                       # (N+1, M)
+        e_exec = kernels.e_exec_speed(speed, ex)                       # (B, N+1)
     else:
-        margin = np.full((B, N + 1, M), params.noshared_margin_m)
-    D = kernels.inflated_radius(obstacles.r, margin, unc)              # eq:shared_barrier
-    h = kernels.barrier(q2, D)
-    h_min = h.reshape(B, -1).min(axis=1)
-    deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
-    qn, hn, rn = q[:, :N], h[:, :N], relv[:, :N]
-    gamma = 2.0 * (qn.real * rn.real + qn.imag * rn.imag) + params.alpha_per_s * hn
+        kap, rel_speed, pred, e_exec = 0.0, np.zeros((0, 0, 0)), np.zeros((N + 1, M)), np.zeros((B, N + 1))
     # |grad_u gamma|^2 = 4 ||A_xy^T R^T q||^2 (A_xy = translational rows of A, all three u channels)
     if K.unit_gradient:
-        grad2 = 4.0 * q2[:, :N]
+        grad2 = np.zeros((0, 0, 0))                                    # 4 ||q||^2, in the kernel
     else:
         A = K.A
-        qb = qn * np.exp(-1j * TH[:, :N])[:, :, None]                  # R^T q
+        qb = (Pc[:, :N, None] - Oc[None, :N]) * np.exp(-1j * TH[:, :N])[:, :, None]     # R^T q
         G = A[:2] @ A[:2].T
         grad2 = 4.0 * (G[0, 0] * qb.real ** 2 + 2 * G[0, 1] * qb.real * qb.imag + G[1, 1] * qb.imag ** 2)
-    viol = np.maximum(-gamma, 0.0)
-    W = (viol * viol / (grad2 + params.w_eps)).reshape(B, -1).sum(axis=1)
+    h, margin, wterm = (np.empty((B, N + 1, M)), np.empty((B, N + 1, M)), np.empty((B, N, M)))
+    _barrier_kernel(np.ascontiguousarray(Pc), np.ascontiguousarray(Vc), np.ascontiguousarray(Oc), Ov,
+                    np.asarray(obstacles.r, float), rel_speed, pred, e_exec, float(kap), shared, float(params.noshared_margin_m),
+                    float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s), float(unc.e_zoh_m),
+                    float(params.alpha_per_s), float(params.w_eps), grad2, h, margin, wterm)
+    h_min = h.reshape(B, -1).min(axis=1)
+    deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
+    W = wterm.reshape(B, -1).sum(axis=1)
     return h_min, W, deficit, margin
+
+
+@kernel
+def _barrier_kernel(Pc, Vc, Oc, Ov, r, rel_speed, pred, e_exec, kap, shared, noshared_margin, r_robot, d0, tau95, e_zoh, alpha,
+                    w_eps, grad2, h, margin, wterm):
+    """The per-(b, k, i) terms of :func:`_barrier_terms` into h, margin (B, N+1, M) and wterm (B, N, M), in the
+    order of the numpy formulas they replace (``kernels.uncertainty_radius``, ``inflated_radius``, ``barrier``,
+    eq:uncertainty_margin (21), eq:shared_barrier (20); the summand of eq:analytic_workload (24)): real arithmetic
+    only; the relative speeds (numpy's complex abs, vectorized, is not hypot to the bit) and the sums over the
+    terms are left to numpy. grad2 (B, N, M), or empty for 4 ||q||^2."""
+    B, N1 = Pc.shape
+    M = Oc.shape[1]
+    unit = grad2.shape[0] == 0
+    for b in range(B):
+        for k in range(N1):
+            for i in range(M):
+                q = Pc[b, k] - Oc[k, i]
+                q2 = q.real ** 2 + q.imag ** 2
+                rv = Vc[b, k] - Ov[i]
+                if shared:
+                    m = kap * (tau95 * rel_speed[b, k, i] + pred[k, i] + (e_exec[b, k] + e_zoh))
+                else:
+                    m = noshared_margin
+                D = r_robot + r[i] + d0 + m
+                hk = q2 - D * D
+                h[b, k, i] = hk
+                margin[b, k, i] = m
+                if k < N1 - 1:
+                    gamma = 2.0 * (q.real * rv.real + q.imag * rv.imag) + alpha * hk
+                    g2 = 4.0 * q2 if unit else grad2[b, k, i]
+                    viol = -gamma
+                    if not (viol >= 0.0 or viol != viol):
+                        viol = 0.0
+                    wterm[b, k, i] = viol * viol / (g2 + w_eps)
 
 
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
