@@ -212,7 +212,7 @@ class Episode:
     def from_config(cls, scenario: Scenario, method: str | None, seed: int, config, **kwargs) -> "Episode":
         """An episode with the stack, perception, pedestrian and method parameters of a
         :class:`bigcbf.config.RunConfig`; ``kwargs`` as for the constructor (perception, time_limit_s, ...)."""
-        return cls(scenario, method, seed, config.stack, perception_params=config.perception,
+        return cls(scenario, method, seed, config.stack_for(method), perception_params=config.perception,
                    pedestrian_params=config.pedestrians,
                    method_params=None if method is None else config.method_params(method),
                    route=config.route, **kwargs)
