@@ -5,25 +5,38 @@
   and pedestrian bodies) from its initial state with constant wheel targets, as many steps as the episode took,
   timed in the same run right after it: the floor the episode loop could reach.
 - ``episode_physics_ratio``: the first over the second (1 would mean the stack and the loop cost nothing).
+- ``episode_route_tick_mean_ms`` (with the route layer on, ``big-cbf-plus`` in ``bigcbf perf``): the route
+  layer's time (map updates, replans, look-ahead points) per control tick of that episode.
 """
 from __future__ import annotations
 
 from .episode import Episode
+from .control.route import RouteParams
 from .params.stack import SIMULATION
 from .scenario import load_scenario
 from .sim.perf import bare_physics_realtime_factor
 
 
-def bench(quick: bool = False) -> dict:
+def episode_figures(method: str, quick: bool = False, route: RouteParams | None = None) -> dict:
+    """The figures of the module docstring for one ``method`` episode (``route``: its route layer, off by default)."""
     sc = load_scenario("single_person_crossing" if quick else "mixed_dense_traffic", 0)
-    ep = Episode(sc, "big-cbf", 0, SIMULATION, perception="lidar")
+    ep = Episode(sc, method, 0, SIMULATION, perception="lidar", route=route)
     res = ep.run()
     model = ep.world.model
     n_steps = max(1, int(round(res.sim_time_s / model.opt.timestep)))
     episode_rf = res.sim_time_s / res.wall_time_s
     physics_rf = bare_physics_realtime_factor(model, n_steps)
-    return {"episode_realtime_factor": round(episode_rf, 2),
-            "episode_physics_realtime_factor": round(physics_rf, 2),
-            "episode_physics_ratio": round(episode_rf / physics_rf, 3),
-            "episode_scenario": sc.name,
-            "episode_sim_time_s": res.sim_time_s}
+    out = {"episode_realtime_factor": round(episode_rf, 2),
+           "episode_physics_realtime_factor": round(physics_rf, 2),
+           "episode_physics_ratio": round(episode_rf / physics_rf, 3),
+           "episode_scenario": sc.name,
+           "episode_sim_time_s": res.sim_time_s}
+    if ep.route is not None:              # the route layer's own share, per control tick of this episode
+        ticks = max(1, len(ep.route.goal_ms))
+        out["episode_route_tick_mean_ms"] = round(sum(ep.route.scan_ms + ep.route.plan_ms + ep.route.goal_ms) / ticks,
+                                                  4)
+    return out
+
+
+def bench(quick: bool = False) -> dict:
+    return episode_figures("big-cbf", quick)

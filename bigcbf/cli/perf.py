@@ -31,8 +31,8 @@ RATIO_FIGURES = ("imagination_p95_steps", "perception_steps", "cbf_qp_p95_steps"
 
 #: The methods reported side by side in ``by_method``, each with where its figures come from: None for the
 #: providers above (they measure big-cbf), else "module:function" -> function(quick) -> dict with the same
-#: ``*_ms`` figures and ``episode_physics_ratio`` for that method. big-cbf-plus (BIG-CBF with its route layer) is
-#: "not available" until the method is registered and that provider exists.
+#: ``*_ms`` figures and ``episode_physics_ratio`` for that method. big-cbf-plus: its own selection cycle, filter,
+#: perception and an episode with its route layer on (``bigcbf.control.perf.bench_big_cbf_plus``).
 SIDE_BY_SIDE = {"big-cbf": None, "big-cbf-plus": "bigcbf.control.perf:bench_big_cbf_plus"}
 
 

@@ -107,12 +107,10 @@ def _route(quick: bool, params) -> dict:
             "route_scan_median_ms": _p(scan_ts, 50), "route_tick_mean_ms": round(1e3 * float(per_tick), 4)}
 
 
-def bench(quick: bool = False) -> dict:
+def _selection(planner, quick: bool) -> dict:
+    """imagination_p95_ms / _median_ms (one selection cycle of ``planner`` over the seeded scenes of
+    :func:`_scene`) and plan_tick_p95_ms (a plan() call between selections)."""
     rng = np.random.default_rng(0)
-    params = SIMULATION
-
-    # one selection cycle (imagination + scoring + selection)
-    planner = BigCbfPlanner(params)
     scenes = [_scene(rng) for _ in range(20)]
     n_img = 200 if quick else 1000
     img_ts = []
@@ -130,9 +128,12 @@ def bench(quick: bool = False) -> dict:
         _, info = planner.plan(0.05 * k, state, obs, goal)
         if not info.planned:
             tick_ts.append(time.perf_counter() - t0)
+    return {"imagination_p95_ms": _p(img_ts, 95), "imagination_median_ms": _p(img_ts, 50),
+            "plan_tick_p95_ms": _p(tick_ts, 95)}
 
-    # the CBF-QP: 8 obstacles around the robot, constraints active
-    filt = CbfFilter(params)
+
+def _cbf_qp(filt: CbfFilter, quick: bool) -> dict:
+    """cbf_qp_p95_ms / _median_ms, cbf_qp_rows_mean, cbf_pass_p95_ms of ``filt`` (module docstring)."""
     ang = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
     ring = Obstacles.from_lists(np.c_[np.cos(ang), np.sin(ang)] * 0.75, r=0.15)
     state = RobotState(0.0, 0.0, 0.0)
@@ -153,13 +154,28 @@ def bench(quick: bool = False) -> dict:
         dt = time.perf_counter() - t0
         if k >= 50 and not info.active:
             pass_ts.append(dt)
-    return {
-        "imagination_p95_ms": _p(img_ts, 95),
-        "imagination_median_ms": _p(img_ts, 50),
-        "plan_tick_p95_ms": _p(tick_ts, 95),
-        "cbf_qp_p95_ms": _p(qp_ts, 95),
-        "cbf_qp_median_ms": _p(qp_ts, 50),
-        "cbf_qp_rows_mean": round(float(np.mean(n_rows)), 2),
-        "cbf_pass_p95_ms": _p(pass_ts, 95),
-        **_route(quick, params),
-    }
+    return {"cbf_qp_p95_ms": _p(qp_ts, 95), "cbf_qp_median_ms": _p(qp_ts, 50),
+            "cbf_qp_rows_mean": round(float(np.mean(n_rows)), 2), "cbf_pass_p95_ms": _p(pass_ts, 95)}
+
+
+def bench(quick: bool = False) -> dict:
+    params = SIMULATION
+    return {**_selection(BigCbfPlanner(params), quick), **_cbf_qp(CbfFilter(params), quick),
+            **_route(quick, params)}
+
+
+def bench_big_cbf_plus(quick: bool = False) -> dict:
+    """The figures of :func:`bench` for ``big-cbf-plus`` (its default rules, :class:`~bigcbf.params.stack.PlusRules`)
+    measured in this call: its selection cycle over the same scenes, the CBF-QP of the filter it runs under
+    (``control.methods.filter_params``), perception per scan (the same pipeline: ``bigcbf.perception.perf``), and a
+    whole episode with its route layer on (``bigcbf.episode_perf.episode_figures``: the route layer's map, A* and
+    look-ahead point are in its real-time factor; ``route_*`` give their own cost)."""
+    from ..episode_perf import episode_figures
+    from ..perception.perf import bench as perception_bench
+    from .methods import filter_params, make_planner
+    params = SIMULATION
+    planner = make_planner("big-cbf-plus", params)
+    return {**_selection(planner, quick), **_cbf_qp(CbfFilter(filter_params(planner, params)), quick),
+            "perception_ms": perception_bench(quick)["perception_ms"],
+            **episode_figures("big-cbf-plus", quick, route=RouteParams(enabled=True)),
+            **_route(quick, params)}
