@@ -269,3 +269,311 @@ def run_config(grid: Grid, mg: MethodGrid, index: int, base=None):
     table = method_table(mg, index)
     shared = {m: {"stack": table["stack"]} for m in mg.shared_by if "stack" in table}
     return run_config_from_dict({"methods": {mg.method: table, **shared}}, file=str(grid.path), base=base)
+
+
+# --- the run -----------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Arm:
+    """One (method, configuration) of the search and its episodes."""
+    method: str
+    index: int
+    params_hash: str
+    params_toml: str
+    tasks: tuple
+
+
+def dev_worlds(grid: Grid, out: Path, families=None, world_seeds=None, time_limit_s: float | None = None) -> list[Path]:
+    """Write the subset's worlds into ``out/worlds/dev/`` (as the generated suite does) and return their paths, seed
+    by seed over the families. ``time_limit_s`` (tests, smoke runs): each world's time limit replaced by it, the
+    file then named ``..._tl<S>.toml`` (a different scenario, with a different key)."""
+    from .. import worlds
+    from ..params.toml_io import parse_toml
+    import tomli_w
+
+    families = list(grid.families if families is None else families)
+    seeds = list(grid.world_seeds if world_seeds is None else world_seeds)
+    for fam in families:
+        if fam not in grid.families:
+            raise UserError(f"family {fam!r} is not in the tuning subset ({', '.join(grid.families)})")
+    for s in seeds:
+        if s not in grid.world_seeds:
+            raise UserError(f"world seed {s} is not in the tuning subset ({grid.world_seeds})")
+    paths = []
+    for s in seeds:
+        for fam in families:
+            w = worlds.generate(fam, s)
+            if time_limit_s is None:
+                p = out / "worlds" / grid.split / f"{w.name}.toml"
+                worlds.write(w, p)
+            else:
+                data = parse_toml(w.toml, w.name)
+                data.update(time_limit_s=float(time_limit_s), name=f"{w.name}_tl{time_limit_s:g}")
+                p = out / "worlds" / grid.split / f"{data['name']}.toml"
+                p.parent.mkdir(parents=True, exist_ok=True)
+                p.write_text(tomli_w.dumps(data))
+            paths.append(p)
+    return paths
+
+
+def plan_arms(grid: Grid, out: Path, methods=None, configs=None, **world_kwargs) -> list[Arm]:
+    """The search's arms: every (method, configuration) of ``methods`` (default: every method of the grid) and
+    ``configs`` (indices, default all), each with its episode tasks on the subset's worlds (the bench's tasks, with
+    the arm's run configuration in their key)."""
+    from ..config import RunConfig
+    from .runner import BenchConfig, plan
+    from .tasks import params_key, params_toml
+
+    methods = list(grid.methods if methods is None else methods)
+    for m in methods:
+        if m not in grid.methods:
+            raise UserError(f"method {m!r} is not in the tuning grid (its methods: {', '.join(grid.methods)}; "
+                            f"{', '.join(s for g in grid.methods.values() for s in g.shared_by)} take another's "
+                            "choice)", file=str(grid.path))
+    indices = list(range(BUDGET) if configs is None else configs)
+    bad = [i for i in indices if not isinstance(i, int) or not 0 <= i < BUDGET]
+    if bad:
+        raise UserError(f"configurations are numbered 0-{BUDGET - 1}, got {bad}")
+    paths = dev_worlds(grid, out, **world_kwargs)
+    base, _, _ = plan(BenchConfig(out=out, methods=tuple(methods), scenarios=tuple(str(p) for p in paths),
+                                  seeds=(grid.episode_seed,), config=RunConfig()))
+    arms = []
+    for m in methods:
+        mine = [t for t in base if t.method == m]
+        for i in indices:
+            text = params_toml(run_config(grid, grid.methods[m], i))
+            h = params_key(text, mine[0].perception)
+            arms.append(Arm(m, i, h, text, tuple(dataclasses.replace(t, params_hash=h, params_toml=text)
+                                                for t in mine)))
+    return arms
+
+
+def run_tuning(grid: Grid, out: str | Path, methods=None, workers: int | None = None, *, configs=None,
+               progress: bool | None = None, log=None, **world_kwargs) -> dict:
+    """Run (or resume) the search into ``out`` and write its outputs there (module docstring); returns the
+    results (:func:`results`). ``world_kwargs``: ``families``, ``world_seeds``, ``time_limit_s`` of
+    :func:`dev_worlds` (a slice of the subset, for tests and cost measurements)."""
+    from tqdm import tqdm
+
+    from . import engines
+    from .runner import DB_NAME, _DirLock, _prepare_out, check_bench_out
+    from .store import ResultStore
+    from .tasks import run_episode
+
+    log = log or (lambda msg: tqdm.write(msg, file=sys.stderr))
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers must be >= 1, got {workers}")
+    out = Path(out)
+    check_bench_out(out)
+    out = _prepare_out(out)
+    arms = plan_arms(grid, out, methods, configs, **world_kwargs)
+    tasks = [t for a in arms for t in a.tasks]
+    lock = _DirLock(out)
+    t0 = time.perf_counter()
+    try:
+        with ResultStore(out / DB_NAME) as store:
+            for a in arms:
+                store.add_params(a.params_hash, a.tasks[0].perception, a.params_toml)
+            for t in {t.scenario_sha: t for t in tasks}.values():
+                store.add_scenario(t.scenario_sha, t.scenario, t.scenario_toml)
+            done = store.ok_keys()
+            todo = [t for t in tasks if t.key not in done]
+            bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="ep", desc="tune", dynamic_ncols=True,
+                       disable=(not sys.stderr.isatty()) if progress is None else not progress)
+
+            def on_row(row: dict) -> None:
+                store.put(row)
+                bar.update(1)
+                if row["status"] == "error":
+                    log(f"tune: error in {row['scenario']} / {row['method']}: {row['error'].splitlines()[0]}")
+            try:
+                if todo:
+                    engines.run("local", todo, workers, on_row, run_episode)
+            finally:
+                bar.close()
+            rows = {(r["method"], r["params_hash"], r["scenario"]): r for r in store.rows([t.key for t in tasks])}
+        res = results(grid, arms, rows, complete=configs is None and methods is None and
+                      all(v is None for v in world_kwargs.values()))
+        res["worlds"] = list(dict.fromkeys(t.scenario for t in tasks))
+        res["time_limit_s"] = world_kwargs.get("time_limit_s")
+        res["run"] = {"episodes": len(tasks), "already_done": len(tasks) - len(todo), "ran": len(todo),
+                      "wall_time_s": round(time.perf_counter() - t0, 1), "workers": workers or "all cores"}
+        write_outputs(out, grid, res)
+    finally:
+        lock.release()
+    log(f"tune: {len(tasks)} episodes ({len(tasks) - len(todo)} already done); {res['run']['wall_time_s']} s; "
+        f"wrote {out}")
+    return res
+
+
+# --- results, selection and outputs ------------------------------------------------------------------------------
+
+def arm_stats(grid: Grid, arm: Arm, rows: dict) -> dict:
+    """One configuration's figures over its episodes: success with its Wilson 95 % interval, at-fault collisions
+    (every collision when the episode has no contact rating), timeouts, mean time to goal over the successes."""
+    from .stats import wilson_pct
+
+    got = [rows.get((arm.method, arm.params_hash, t.scenario)) for t in arm.tasks]
+    ok = [r["metrics"] for r in got if r is not None and r["status"] == "ok"]
+    n, k = len(ok), sum(bool(m["success"]) for m in ok)
+    times = [float(m["time_s"]) for m in ok if m["success"]]
+    return {"config": arm.index, "params": grid.methods[arm.method].values(arm.index), "episodes": len(arm.tasks),
+            "ok": n, "errors": sum(1 for r in got if r is not None and r["status"] == "error"),
+            "missing": sum(r is None for r in got), "successes": k,
+            "success_pct": round(100.0 * k / n, 2) if n else None, "success_ci95_pct": wilson_pct(k, n),
+            "at_fault_collisions": sum(bool(m.get("at_fault_collision", m["collision"])) for m in ok),
+            "collisions": sum(bool(m["collision"]) for m in ok), "timeouts": sum(bool(m["timeout"]) for m in ok),
+            "mean_time_to_goal_s": round(sum(times) / len(times), 3) if times else None,
+            "params_hash": arm.params_hash}
+
+
+def select(stats: list[dict]) -> int | None:
+    """The chosen configuration by the protocol's rule (module docstring); None while any configuration has an
+    episode missing or in error (the rule compares complete results only)."""
+    if not stats or any(s["errors"] or s["missing"] for s in stats):
+        return None
+    best = min(stats, key=lambda s: (-s["successes"], s["at_fault_collisions"],
+                                     math.inf if s["mean_time_to_goal_s"] is None else s["mean_time_to_goal_s"],
+                                     s["config"]))
+    return best["config"]
+
+
+def provenance() -> dict:
+    """The code behind the results: the git commit of the checkout (``+dirty`` with uncommitted changes under
+    bigcbf/) when there is one, and the package's code sha (every row of the store carries it too)."""
+    from .tasks import code_sha
+    root = Path(__file__).resolve().parent.parent.parent
+    commit = None
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"], capture_output=True,
+                                text=True, timeout=10, check=True).stdout.strip() or None
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--", "bigcbf"],
+                               capture_output=True, text=True, timeout=10, check=True).stdout.strip()
+        if commit and dirty:
+            commit += "+dirty"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"git_commit": commit, "code_sha": code_sha(),
+            "utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+
+
+def results(grid: Grid, arms: list[Arm], rows: dict, complete: bool) -> dict:
+    """The search's results: per method, each configuration's figures and the chosen one."""
+    methods = {}
+    for m in dict.fromkeys(a.method for a in arms):
+        stats = [arm_stats(grid, a, rows) for a in arms if a.method == m]
+        mg = grid.methods[m]
+        methods[m] = {"chosen": select(stats), "shared_by": list(mg.shared_by),
+                      "params": [{"name": p.name, "unit": p.unit, "range": [p.lo, p.hi], "default": p.default}
+                                 for p in mg.params], "configs": stats}
+    return {"grid": str(grid.path), "grid_sha": grid.sha, "code": provenance(), "selection": grid.selection,
+            "subset": {"split": grid.split, "families": list(grid.families), "world_seeds": list(grid.world_seeds),
+                       "episode_seed": grid.episode_seed},
+            "complete_protocol": complete, "methods": methods}
+
+
+CSV_COLUMNS = ("method", "config", "chosen", "params", "episodes", "ok", "errors", "missing", "successes",
+               "success_pct", "success_ci95_lo", "success_ci95_hi", "at_fault_collisions", "collisions", "timeouts",
+               "mean_time_to_goal_s", "params_hash")
+
+
+def results_csv(res: dict) -> str:
+    """One line per (method, configuration)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(CSV_COLUMNS)
+    for m, r in res["methods"].items():
+        for s in r["configs"]:
+            ci = s["success_ci95_pct"] or [None, None]
+            w.writerow([m, s["config"], int(s["config"] == r["chosen"]),
+                        "; ".join(f"{k}={v}" for k, v in s["params"].items()), s["episodes"], s["ok"], s["errors"],
+                        s["missing"], s["successes"], s["success_pct"], ci[0], ci[1], s["at_fault_collisions"],
+                        s["collisions"], s["timeouts"], s["mean_time_to_goal_s"], s["params_hash"]])
+    return buf.getvalue()
+
+
+def _line(s: dict) -> str:
+    from .stats import fmt_ci
+    t = "-" if s["mean_time_to_goal_s"] is None else f"{s['mean_time_to_goal_s']:.1f} s"
+    return (f"success {s['successes']}/{s['ok']} = {fmt_ci(s['success_pct'], s['success_ci95_pct'])} %, at-fault "
+            f"{s['at_fault_collisions']}, mean time to goal {t}")
+
+
+def tuned_toml(grid: Grid, res: dict) -> str:
+    """The chosen configurations as a run configuration (``[methods.NAME]`` tables, stack keys under
+    ``[methods.NAME.stack]``), with its provenance in the leading comments."""
+    import tomli_w
+    code = res["code"]
+    head = [f"Tuned run configuration, written by `bigcbf tune` (issue 24 item 4; docs/tuning.md) on {code['utc']}.",
+            f"Provenance: grid {Path(res['grid']).name} sha256 {res['grid_sha']}; code git {code['git_commit']} "
+            f"(code sha {code['code_sha']}).",
+            f"Subset: {res['subset']['split']} split, families {', '.join(res['subset']['families'])}, world seeds "
+            f"{res['subset']['world_seeds']}, episode seed {res['subset']['episode_seed']}.",
+            "The whole protocol: " + ("yes." if res["complete_protocol"] else
+                                      f"NO, a slice of it: worlds {', '.join(res.get('worlds', []))}, time limit "
+                                      f"{res.get('time_limit_s') or 'of each world'}; not for shipping."),
+            f"Selection: {res['selection']}"]
+    tables: dict = {}
+    for m, r in res["methods"].items():
+        if r["chosen"] is None:
+            head.append(f"{m}: no choice (episodes missing or in error); its defaults apply.")
+            continue
+        s = r["configs"][[c["config"] for c in r["configs"]].index(r["chosen"])]
+        head.append(f"{m}: configuration {r['chosen']} of {BUDGET}: {_line(s)}"
+                    + (f"; shared by {', '.join(r['shared_by'])}" if r["shared_by"] else ""))
+        table = method_table(grid.methods[m], r["chosen"])
+        tables[m] = table
+        for other in r["shared_by"]:
+            if "stack" in table:
+                tables[other] = {"stack": table["stack"]}
+    text = "".join(f"# {line}\n" for line in head)
+    return text + ("\n" + tomli_w.dumps({"methods": tables}) if tables else "")
+
+
+def write_outputs(out: Path, grid: Grid, res: dict) -> None:
+    """tuning.csv, tuning.json and tuned.toml into ``out`` (atomically); tuned.toml is read back as a run
+    configuration."""
+    from ..config import load_run_config
+    from ..outputs import strict_json, write_text
+    write_text(out / "tuning.csv", results_csv(res), "tuning results")
+    write_text(out / "tuning.json", strict_json(res, indent=1) + "\n", "tuning results")
+    write_text(out / "tuned.toml", tuned_toml(grid, res), "tuned run configuration")
+    load_run_config(out / "tuned.toml")
+
+
+def write_shipped(out: str | Path, grid: Grid) -> list[Path]:
+    """Copy a finished search's tuned.toml and results into bigcbf/params/tuning/ (tuned.toml, results.csv,
+    results.json). Refused unless ``out`` holds the whole protocol of ``grid`` (every method, configuration and
+    world, no time-limit change), with a choice for every method."""
+    from ..outputs import write_text
+    out = Path(out)
+    try:
+        res = json.loads((out / "tuning.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise UserError(f"no finished search to ship ({exc})", file=str(out / "tuning.json")) from None
+    if not res.get("complete_protocol"):
+        raise UserError("a slice of the protocol (fewer methods, configurations or worlds): rerun `bigcbf tune` "
+                        "without --methods/--configs/--families/--world-seeds/--time-limit", file=str(out))
+    if res.get("grid_sha") != grid.sha:
+        raise UserError(f"the search ran grid {res.get('grid_sha')}, the grid is now {grid.sha}: rerun it",
+                        file=str(out))
+    missing = [m for m in grid.methods if res["methods"].get(m, {}).get("chosen") is None]
+    if missing:
+        raise UserError(f"no choice for {', '.join(missing)} (episodes missing or in error): rerun to resume",
+                        file=str(out))
+    written = []
+    for name, dest in SHIPPED.items():
+        written.append(write_text(dest, (out / name).read_text(), "shipped tuning file"))
+    return written
+
+
+def table_lines(res: dict) -> list[str]:
+    """A plain-text table of the search (what `bigcbf tune` prints)."""
+    lines = []
+    for m, r in res["methods"].items():
+        for s in r["configs"]:
+            mark = "*" if s["config"] == r["chosen"] else " "
+            extra = f", {s['errors']} errors" if s["errors"] else ""
+            extra += f", {s['missing']} not run" if s["missing"] else ""
+            lines.append(f"{mark} {m:<14} {s['config']}  {_line(s)}{extra}")
+    return lines
