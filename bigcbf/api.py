@@ -157,12 +157,13 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
                  suite: str = "paper", seeds: int | Iterable[int] | None = None, workers: int | None = None,
                  engine: str = "local", ray_address: str | None = None, config: str | Path | RunConfig | None = None,
                  profile: str | Path | None = None, perception: str = "lidar", split: str | None = None,
-                 notes: Callable[[str], None] | None = None):
+                 notes: Callable[[str], None] | None = None, variants: Sequence[str] | None = None):
     """The :class:`bigcbf.bench.runner.BenchConfig` that :func:`run_bench` runs (what ``bigcbf bench`` builds from
     its options). ``seeds``: a count N (seeds 0..N-1) or the seeds themselves; default the suite's count.
     ``methods``: default every registered method. ``scenarios``: default the suite's (``split``: only that split
     of a suite that has splits, e.g. generated's dev or test). The run configuration is the suite's stack
-    parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`).
+    parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`). ``variants``: texts
+    ``NAME=V1,V2`` (``bigcbf bench --variant``, :mod:`bigcbf.bench.variants`): every method under every combination.
 
     Checked as ``bigcbf bench`` checks its options, before anything is written: ``seeds`` a count in [1, 10000]
     or 1 to 10000 seeds in [0, 4294967295]; ``methods`` and ``scenarios`` non-empty lists (None: the default);
@@ -196,6 +197,8 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
     if split is not None and not isinstance(split, str):
         raise UserError(f"expected a split name, got {split!r}"[:160], field="split")
     check_callable(notes, "notes")
+    from .bench.variants import parse_variants
+    variant_specs = tuple(variants or ()) if parse_variants(variants, "variants") else ()
     s = SUITES.get(suite)
     seed_list = check_seeds(s.default_seeds if seeds is None else seeds)
     workers = check_workers(workers, engine)
@@ -227,7 +230,7 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
         labels = tuple((str(e.scenario), e.split, e.family) for e in entries if e.split or e.family)
     return BenchConfig(out=out, methods=method_list, scenarios=scenario_list, seeds=seed_list, workers=workers,
                        engine=engine, ray_address=ray_address, config=cfg, perception=perception, labels=labels,
-                       suite=None if scenarios is not None else s.name)
+                       suite=None if scenarios is not None else s.name, variants=variant_specs)
 
 
 #: what run_bench says when a script calls it at its top level, where every bench worker would run it again

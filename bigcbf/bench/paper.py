@@ -152,7 +152,7 @@ def comparability(rows, scenarios, seeds, suite: str | None, default_params_hash
         if need_seeds and n_seeds != PAPER_SEEDS:
             why.append(f"{n_seeds} seed{'s' if n_seeds != 1 else ''} per scene, the paper's {PAPER_SEEDS}")
         if not default:
-            why.append("a run configuration other than the defaults (--config/--profile)")
+            why.append("a run configuration other than the defaults (--config/--profile/--route/--variant)")
         return {"comparable": not why, "why": "; ".join(why)}
 
     quoted = [s for s in same if s in PAPER_SCENARIO_SUCCESS] if n_seeds == PAPER_SEEDS and default else []

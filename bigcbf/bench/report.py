@@ -10,7 +10,9 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
   obstacle's surface, negative for a penetration (not the paper's disc of radius r_R).
 - ``e_cbf``: mean over episodes of E_CBF, eq:sim_cbf_energy (27) (a per-episode sum, as in the paper).
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
-  over all control steps of all episodes of the group (the paper's "fraction of control steps").
+  over all control steps of all episodes of the group (the paper's "fraction of control steps");
+  ``qp_infeasible_ci95_pct``: the latter's 95 % interval with the episode as the independent unit
+  (:func:`bigcbf.bench.stats.ratio_ci_pct`; None with fewer than two episodes).
 - ``cbf_active_episode_pct``: the mean over episodes of each episode's active ratio, x 100 (a long episode, e.g. a
   stalled timeout at 0 %, weighs as much as a short one; the pooled figure weighs episodes by their length).
 - ``e_cbf_infeasible_share_pct``: 100 x the E_CBF of control steps whose QP was infeasible / all E_CBF, summed over
@@ -43,6 +45,14 @@ family and split instead of method x scenario. ``paired``: each method's success
 (BIG-CBF when it ran, else the first method) over the episodes both finished (same scene, same seed), with the
 95 % interval of Newcombe's method 10 and the exact McNemar p-value (``bigcbf/bench/stats.py``). Every row of the
 tables names the code versions (``code_sha``) and the configuration hash (``params_hash``) its episodes ran with.
+With variants (``bigcbf bench --variant NAME=V1,V2``, ``bigcbf/bench/variants.py``) every row of every table and
+figure is a method under one combination of the axes' values, ``dwa [route=on]`` (summary.json's ``methods`` is
+keyed by these names; ``paired`` compares each with the reference method under the same combination), episodes.csv
+has a column ``variant``, and ``variants`` holds the axes, each method's success, collisions, at-fault and passive
+collisions and QP infeasible fraction per combination with their intervals (``by_method``), and per method, axis and
+value after the axis's first, the paired differences value - first of those (``paired``: Newcombe's interval and
+McNemar's p; the QP fraction's paired interval) over the episodes both ran; summary.md gives them in a table with
+methods as rows and the combinations as column groups, then the paired differences.
 The ``faults`` suite (family: the fault, split: its level) also gets
 ``by_fault`` (``bigcbf/bench/faults.py``): per fault, level (``none``: its scenes without the fault) and method the
 same figures, and in summary.md collisions and success per method and fault, then a table per fault.
@@ -58,14 +68,22 @@ from typing import Iterable, Sequence
 
 from ..errors import UserError
 from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
-from .stats import fmt_ci, paired_difference, wilson_pct
+from .stats import fmt_ci, paired_difference, paired_ratio_difference, ratio_ci_pct, wilson_pct
 from .paper import (METHOD_ORDER, comparability, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
-                    TABLE2_KEYS, display, ordered)
+                    TABLE2_KEYS, ordered)
+from .paper import display as _method_display
+from .variants import arm_label, combination_label, split_label
 
 KEY_FIELDS = ("scenario", "method", "seed", "params_hash", "scenario_sha")
 FIGURES = ("success_heatmap.png", "cbf_burden.png")
 DOCS_BEGIN = "<!-- bench-results:begin -->"
 DOCS_END = "<!-- bench-results:end -->"
+
+
+def display(label: str) -> str:
+    """How a report row is named: the paper's name of its method, then its variant (``DWA [route=on]``)."""
+    method, variant = split_label(label)
+    return f"{_method_display(method)} [{variant}]" if variant else _method_display(method)
 
 
 def _mean(xs: Sequence[float]) -> float | None:
@@ -96,6 +114,7 @@ def summarize(rows: Iterable[dict]) -> dict:
         "e_cbf": _mean([m["e_cbf"] for m in ok]),
         "cbf_active_pct": 100.0 * active / steps if steps else None,
         "qp_infeasible_pct": 100.0 * infeasible / steps if steps else None,
+        "qp_infeasible_ci95_pct": ratio_ci_pct(*_infeasible_steps(ok)),
         "collisions": sum(bool(m["collision"]) for m in ok),
         "timeouts": sum(bool(m["timeout"]) for m in ok),
         **contact_figures(ok),
@@ -108,6 +127,12 @@ def summarize(rows: Iterable[dict]) -> dict:
         **{k: _mean([m.get(k) for m in ok]) for k in MARGIN_KEYS},
         **{k: _mean([m.get(k) for m in ok]) for k in LIVENESS_KEYS},
     }
+
+
+def _infeasible_steps(ok: Sequence[dict]) -> tuple[list[int], list[int]]:
+    """Each episode's infeasible control steps and its control steps (the pooled fraction's clusters)."""
+    return ([round(m["qp_infeasible_ratio"] * m["control_steps"]) for m in ok],
+            [int(m["control_steps"]) for m in ok])
 
 
 #: a near miss: an episode without contact whose smallest time to contact with a pedestrian was below this [s]
@@ -203,9 +228,14 @@ def _share(part: Sequence[float | None], whole: Sequence[float]) -> float | None
 
 
 def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str], seeds: Sequence[int],
-                  info: dict | None = None, groups: dict | None = None) -> dict:
+                  info: dict | None = None, groups: dict | None = None, variants: dict | None = None) -> dict:
     """summary.json's content: figures keyed by method and by method then scenario, the paper's, and errors;
-    with ``groups`` (scenario -> {"split", "family"}) also by method, split and family."""
+    with ``groups`` (scenario -> {"split", "family"}) also by method, split and family; with ``variants``
+    (``bigcbf.bench.runner._variant_info``) every row is a method under one combination (``dwa [route=on]``) and
+    ``variants`` compares each method's combinations (:func:`variant_summary`)."""
+    base_methods = list(methods)
+    if variants:
+        rows, methods = relabel(rows, methods, variants)
     by_m = {m: [r for r in rows if r["method"] == m] for m in methods}
     versions = sorted({r["code_sha"] for r in rows if r["status"] == "ok" and r.get("code_sha")})
     extra = {}
@@ -215,7 +245,7 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
         from .faults import FAULTS, by_fault
         if any(g["family"] in FAULTS for g in groups.values()):      # the faults suite (or some of its files)
             extra["by_fault"] = by_fault(rows, methods, groups, summarize)
-    return {
+    summary = {
         "bench": {**(info or {}), "methods": list(methods), "scenarios": list(scenarios), "seeds": list(seeds),
                   "episodes_expected": len(methods) * len(scenarios) * len(seeds), "episodes_recorded": len(rows),
                   "ok": sum(r["status"] == "ok" for r in rows), "errors": sum(r["status"] == "error" for r in rows),
@@ -234,6 +264,75 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
                            for r in rows if r["status"] == "error"],
         **extra,
     }
+    if variants:
+        summary["variants"] = variant_summary(rows, base_methods, variants, summary["methods"])
+    return summary
+
+
+def relabel(rows: Sequence[dict], methods: Sequence[str], variants: dict) -> tuple[list[dict], list[str]]:
+    """Rows whose ``method`` is their report row's name, ``method [axis=value, ...]`` (from the row's params_hash),
+    with ``base_method`` and ``variant`` (the combination) added; and those names, each method's combinations in
+    order."""
+    by_hash = variants["by_hash"]
+    out = [{**r, "method": arm_label(r["method"], by_hash.get(r["params_hash"], ())), "base_method": r["method"],
+            "variant": by_hash.get(r["params_hash"], ())} for r in rows]
+    return out, [arm_label(m, c) for m in methods for c in variants["combinations"]]
+
+
+#: a method's figures under each combination in summary.json's ``variants.by_method`` (as in ``methods``)
+VARIANT_FIGURES = ("ok", "success_pct", "success_ci95_pct", "collisions", "collision_pct", "collision_ci95_pct",
+                   "at_fault_collisions", "at_fault_collision_pct", "at_fault_collision_ci95_pct",
+                   "passive_collisions", "passive_collision_pct", "passive_collision_ci95_pct", "qp_infeasible_pct",
+                   "qp_infeasible_ci95_pct")
+#: the episode outcomes whose paired differences between variants summary.json gives
+PAIRED_OUTCOMES = ("success", "collision", "at_fault_collision", "passive_collision")
+
+
+def variant_summary(rows: Sequence[dict], methods: Sequence[str], variants: dict, per_arm: dict) -> dict:
+    """summary.json's ``variants``: the axes (name, configuration path, values), the combinations, each report
+    row's method, combination and params_hash, each method's figures per combination, and each method's paired
+    differences (:func:`variant_pairs`)."""
+    from .variants import VARIANT_AXES
+    combos = variants["combinations"]
+    hash_of = {c: h for h, c in variants["by_hash"].items()}
+    return {
+        "axes": [{"name": a, "path": VARIANT_AXES.get(a).path, "values": list(vs)} for a, vs in variants["axes"]],
+        "combinations": [combination_label(c) for c in combos],
+        "arms": {arm_label(m, c): {"method": m, "variant": dict(c), "params_hash": hash_of.get(c)}
+                 for m in methods for c in combos},
+        "by_method": {m: {combination_label(c): {k: per_arm[arm_label(m, c)].get(k) for k in VARIANT_FIGURES}
+                          for c in combos} for m in methods},
+        "paired": {m: variant_pairs(rows, m, variants["axes"]) for m in methods},
+    }
+
+
+def variant_pairs(rows: Sequence[dict], method: str, axes: Sequence[tuple[str, Sequence[str]]]) -> list[dict]:
+    """For each axis and each of its values after the first: ``method``'s episodes with that value paired with its
+    episodes with the first value and everything else equal (scene, seed, the other axes' values; pooled over
+    those), and the differences value - first of success, any collision, at-fault and passive collision
+    (:func:`bigcbf.bench.stats.paired_difference`: Newcombe's interval, McNemar's p) and of the QP infeasible
+    fraction of control steps (:func:`bigcbf.bench.stats.paired_ratio_difference`). Episodes without the contact
+    classification (older rows) are left out of the two contact comparisons."""
+    done = {(r["scenario"], r["seed"], tuple(r["variant"])): r["metrics"] for r in rows
+            if r["status"] == "ok" and r.get("base_method") == method}
+    out = []
+    for i, (axis, values) in enumerate(axes):
+        for value in values[1:]:
+            pairs = []
+            for (scene, seed, combo), mine in sorted(done.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][2])):
+                if combo[i][1] != value:
+                    continue
+                ref = done.get((scene, seed, combo[:i] + ((axis, values[0]),) + combo[i + 1:]))
+                if ref is not None:
+                    pairs.append((mine, ref))
+            entry: dict = {"axis": axis, "from": values[0], "to": value, "pairs": len(pairs)}
+            for key in PAIRED_OUTCOMES:
+                both = [(a, b) for a, b in pairs if key in a and key in b]
+                entry[key] = paired_difference([bool(a[key]) for a, _ in both], [bool(b[key]) for _, b in both])
+            mine_steps, ref_steps = _infeasible_steps([a for a, _ in pairs]), _infeasible_steps([b for _, b in pairs])
+            entry["qp_infeasible"] = paired_ratio_difference(*mine_steps, *ref_steps)
+            out.append(entry)
+    return out
 
 
 def default_params_hash(suite: str | None, perception: str = "lidar") -> str | None:
@@ -257,13 +356,16 @@ def provenance(rows: Sequence[dict]) -> dict:
 
 
 def reference_method(methods: Sequence[str]) -> str | None:
-    """The method the others are compared with: BIG-CBF when it ran, else the first."""
-    return "big-cbf" if "big-cbf" in methods else (methods[0] if methods else None)
+    """The method the others are compared with: BIG-CBF when it ran, else the first (of report rows
+    ``method [variant]``: their methods)."""
+    bases = [split_label(m)[0] for m in methods]
+    return "big-cbf" if "big-cbf" in bases else (bases[0] if bases else None)
 
 
 def paired(rows: Sequence[dict], methods: Sequence[str]) -> dict:
     """{"reference": M, "by_method": {method: paired_difference(method, M)}} over the (scenario, seed) pairs both
-    finished without error (:func:`bigcbf.bench.stats.paired_difference`)."""
+    finished without error (:func:`bigcbf.bench.stats.paired_difference`). A report row ``method [variant]`` is
+    compared with the reference method under the same variant."""
     ref = reference_method(methods)
     done = {}
     for r in rows:
@@ -271,24 +373,29 @@ def paired(rows: Sequence[dict], methods: Sequence[str]) -> dict:
             done[(r["method"], r["scenario"], r["seed"])] = bool(r["metrics"]["success"])
     out = {}
     for m in methods:
-        if m == ref:
+        variant = split_label(m)[1]
+        ref_row = f"{ref} [{variant}]" if variant else ref
+        if m == ref_row:
             continue
-        keys = sorted(k[1:] for k in done if k[0] == m and (ref, *k[1:]) in done)
-        out[m] = paired_difference([done[(m, *k)] for k in keys], [done[(ref, *k)] for k in keys])
+        keys = sorted(k[1:] for k in done if k[0] == m and (ref_row, *k[1:]) in done)
+        out[m] = paired_difference([done[(m, *k)] for k in keys], [done[(ref_row, *k)] for k in keys])
     return {"reference": ref, "by_method": out}
 
 
 # --- episodes.csv --------------------------------------------------------------------------------------------------
 
-def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None) -> None:
+def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None, variants: dict | None = None) -> None:
     """Every metric of every episode, one line each; lists and dicts (mode_history, warnings) as JSON text; with
-    ``groups``, each scenario's split and family after the key columns."""
+    ``groups``, each scenario's split and family after the key columns; with ``variants``, each episode's
+    combination (``route=on, cbf_velocity_rows=off``) in column ``variant`` after them."""
     metric_cols: list[str] = []
     for r in rows:
         for k in r["metrics"] or {}:
             if k not in metric_cols and k not in KEY_FIELDS:
                 metric_cols.append(k)
     labels = ["split", "family"] if groups else []
+    if variants:
+        labels.append("variant")
     cols = (list(KEY_FIELDS) + labels + ["status", "error"] + metric_cols
             + ["worker_wall_s", "host", "code_sha", "attempts"])
     with atomic_output(path, "episode table") as tmp, tmp.open("w", newline="") as fh:
@@ -298,7 +405,9 @@ def write_csv(rows: Sequence[dict], path: Path, groups: dict | None = None) -> N
             m = r["metrics"] or {}
             line = []
             for c in cols:
-                if c in labels:
+                if c == "variant":
+                    v = combination_label(variants["by_hash"].get(r["params_hash"], ()))
+                elif c in labels:
                     v = (groups.get(r["scenario"]) or {}).get(c)
                 else:
                     v = m.get(c) if c in metric_cols else r.get(c)
@@ -340,7 +449,10 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
     per_m, per_ms = summary["methods"], summary["by_scenario"]
     n_seeds = len(b["seeds"])
     lines = [f"{h} Benchmark results", ""]
-    lines.append(f"{b['episodes_recorded']} of {b['episodes_expected']} episodes recorded: {len(methods)} methods x "
+    var = summary.get("variants")
+    arms = (f"{len(var['by_method'])} methods x {len(var['combinations'])} variant combinations" if var else
+            f"{len(methods)} methods")
+    lines.append(f"{b['episodes_recorded']} of {b['episodes_expected']} episodes recorded: {arms} x "
                  f"{len(scenarios)} scenarios x {n_seeds} seed{'s' if n_seeds != 1 else ''} (the same seeds for every "
                  "method); "
                  f"{b['ok']} ran, {b['errors']} crashed (recorded as errors, left out of the figures).")
@@ -368,6 +480,7 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
               "infeas.: share of all control steps. Planner P95: mean of the per-episode P95 wall time. Code: the "
               "code versions the method's episodes ran with; Config: the run configuration's hash (the episode "
               "key's params_hash).", ""]
+    lines += _variant_lines(summary, h)
     lines += _paired_lines(summary, h)
     lines += _contacts_lines(methods, [per_m[m] for m in methods], h)
     lines += [f"{h}# Chatter and stall", ""]
@@ -412,6 +525,60 @@ def summary_markdown(summary: dict, *, level: int = 1, image_dir: str = "") -> s
     return _errors_section(summary, h, lines)
 
 
+def _variant_lines(summary: dict, h: str) -> list[str]:
+    """The variants (summary["variants"]): each method's figures per combination (one column group each), then its
+    paired differences value vs first value of each axis."""
+    var = summary.get("variants")
+    if not var:
+        return []
+    combos = var["combinations"]
+    single = len(var["axes"]) == 1
+    short = [c.split("=", 1)[1] if single else c for c in combos]
+    axes = "; ".join(f"{a['name']} ({a['path']}): {', '.join(a['values'])}" for a in var["axes"])
+    lines = [f"{h}# Variants: every method under each combination", "",
+             f"Every method ran under every combination of {axes}, on the same scenes and seeds (rows above: "
+             "`method [axis=value]`). Per method and combination:", ""]
+    cols = ["Success (%)", "Collisions", "At fault", "Passive", "QP infeas. (%)"]
+    head = ["Method"] + [f"{c}: {col}" for c in short for col in cols]
+    body = []
+    for m, per in var["by_method"].items():
+        row = [display(m)]
+        for c in combos:
+            s = per[c]
+            row += [fmt_ci(s["success_pct"], s["success_ci95_pct"]),
+                    "–" if s["collisions"] is None or not s["ok"] else
+                    f"{s['collisions']}: " + fmt_ci(s["collision_pct"], s["collision_ci95_pct"]),
+                    _contact_cell(s, "at_fault"), _contact_cell(s, "passive"),
+                    fmt_ci(s["qp_infeasible_pct"], s["qp_infeasible_ci95_pct"], 2)]
+        body.append(row)
+    lines += _table(head, body)
+    lines += ["", "Each cell: n: % [95 % interval] (Wilson; success as % only). At fault / passive: contacts the robot "
+              "drove into / did not (bigcbf/sim/contacts.py). QP infeas.: infeasible control steps / all control "
+              "steps, its interval from the spread between episodes (bigcbf/bench/stats.py).", "",
+              f"{h}# Variants: paired differences (each value vs the first, same method, scenes and seeds)", ""]
+    body = []
+    for m, entries in var["paired"].items():
+        for e in entries:
+            body.append([display(m), f"{e['axis']}: {e['from']} → {e['to']}", str(e["pairs"])]
+                        + [_diff_cell(e[k]) for k in PAIRED_OUTCOMES]
+                        + [fmt_ci(e["qp_infeasible"]["diff_pct"], e["qp_infeasible"]["ci95_pct"], 2)])
+    lines += _table(["Method", "Change", "Pairs", "Success Δ (pp), p", "Collision Δ (pp), p", "At fault Δ (pp), p",
+                     "Passive Δ (pp), p", "QP infeas. Δ (pp)"], body, align="ll" + "r" * 6)
+    lines += ["", "Δ: the rate with the second value minus the rate with the first, over the episodes both ran "
+              "(same scene and seed, the other axes' values equal), in percentage points with the 95 % interval of "
+              "Newcombe's method 10, and the exact McNemar p; QP infeas. Δ: the difference of the pooled fractions "
+              "with its paired interval. An interval that excludes 0 is a significant difference at the 5 % level.",
+              ""]
+    return lines
+
+
+def _diff_cell(d: dict) -> str:
+    """'+4.0 [-2.1, 10.3], p 0.5' of a paired difference, '–' without pairs."""
+    if d["diff_pct"] is None:
+        return "–"
+    return f"{d['diff_pct']:+.1f} [{d['ci95_pct'][0]:.1f}, {d['ci95_pct'][1]:.1f}], p {d['mcnemar_p']:.3g}"
+
+
 def _paired_lines(summary: dict, h: str) -> list[str]:
     """The paired differences in success against the reference method (summary["paired"])."""
     pr = summary.get("paired") or {}
@@ -424,9 +591,10 @@ def _paired_lines(summary: dict, h: str) -> list[str]:
                     ([display(m), str(d["n"]), str(d["b"]), str(d["c"]), fmt_ci(d["diff_pct"], d["ci95_pct"]),
                       "–" if d["mcnemar_p"] is None else f"{d['mcnemar_p']:.3g}"] for m, d in by.items()))
     lines += ["", f"Each method's success minus {display(ref)}'s over the episodes both finished (same scene, same "
-              "seed), in percentage points, with the 95 % interval of Newcombe's method 10 for paired proportions "
-              "and the exact McNemar test of the discordant pairs (bigcbf/bench/stats.py). An interval that excludes "
-              "0 is a significant difference at the 5 % level.", ""]
+              "seed" + (", same variant" if summary.get("variants") else "") + "), in percentage points, with the 95 % "
+              "interval of Newcombe's method 10 for paired proportions and the exact McNemar test of the discordant "
+              "pairs (bigcbf/bench/stats.py). An interval that excludes 0 is a significant difference at the 5 % "
+              "level.", ""]
     return lines
 
 
@@ -721,12 +889,14 @@ def _savefig(fig, path: Path) -> None:
 # --- everything at once --------------------------------------------------------------------------------------------
 
 def write_reports(out: Path, rows: Sequence[dict], methods: Sequence[str], scenarios: Sequence[str],
-                  seeds: Sequence[int], info: dict | None = None, groups: dict | None = None) -> dict:
+                  seeds: Sequence[int], info: dict | None = None, groups: dict | None = None,
+                  variants: dict | None = None) -> dict:
     """Write episodes.csv, summary.json, summary.md and the two figures into ``out``; return the summary.
-    ``groups``: scenario name -> {"split", "family"} (suites with splits)."""
+    ``groups``: scenario name -> {"split", "family"} (suites with splits); ``variants``: the bench's variant
+    combinations (:func:`build_summary`)."""
     out = Path(out)
-    summary = build_summary(rows, methods, scenarios, seeds, info, groups)
-    write_csv(rows, out / "episodes.csv", groups)
+    summary = build_summary(rows, methods, scenarios, seeds, info, groups, variants)
+    write_csv(rows, out / "episodes.csv", groups, variants)
     write_json(summary, out / "summary.json")
     write_text(out / "summary.md", summary_markdown(summary), "summary")
     plot_heatmap(summary, out / "success_heatmap.png")

@@ -41,6 +41,9 @@ class BenchConfig:
     #: the reports give success per family and split for them
     labels: tuple[tuple[str, str, str], ...] = ()
     suite: str | None = None              # the suite the scenarios come from (reports compare with its paper table)
+    #: ``--variant`` texts, e.g. ("route=off,on", "cbf_velocity_rows=off,on") (bigcbf.bench.variants): every method
+    #: runs under every combination of the values, each combination's configuration in its episodes' key
+    variants: tuple[str, ...] = ()
 
 
 @dataclass
@@ -93,14 +96,13 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     if config.perception not in PERCEPTION_MODES:
         raise UserError(f"unknown perception {config.perception!r}; known: {', '.join(PERCEPTION_MODES)}")
     run_config = config.config if config.config is not None else RunConfig()
+    arms = _variant_configs(config, run_config)
     if isinstance(run_config, RunConfig):
         for m in config.methods:         # as `bigcbf run` does: a factory that gives no planner is refused now,
             make_planner(m, run_config.stack, run_config.method_params(m))   # not in every worker's episode
     else:
         for m in config.methods:
             resolve_method(m)
-    ptoml = params_toml(run_config)
-    phash = params_key(ptoml, config.perception)
 
     scen: dict[str, tuple[str, str, str]] = {}     # name -> (key, text, base robot profile's text)
     for s in config.scenarios:
@@ -119,9 +121,36 @@ def plan(config: BenchConfig) -> tuple[list[EpisodeTask], list[str], list[str]]:
     methods, names = report.default_order(config.methods, scen)
     tasks = [EpisodeTask(scenario=n, scenario_sha=scen[n][0], scenario_toml=scen[n][1], method=m, seed=int(seed),
                          params_hash=phash, params_toml=ptoml, perception=config.perception,
-                         robot_profile_toml=scen[n][2])
-             for seed in config.seeds for n in names for m in methods]
+                         robot_profile_toml=scen[n][2], variant=combo)
+             for seed in config.seeds for n in names for m in methods for combo, ptoml, phash in arms]
     return tasks, methods, names
+
+
+def _variant_configs(config: BenchConfig, run_config) -> list[tuple[tuple, str, str]]:
+    """(combination, configuration TOML, params_hash) of each combination of the bench's variant axes, in order;
+    one with the combination () without ``variants`` (the bench's configuration as given: today's keys)."""
+    from ..config import RunConfig
+    from ..params.stack import StackParams
+    from .variants import apply_combination, combination_label, combinations, parse_variants
+
+    axes = parse_variants(config.variants or None, "variants")
+    if not axes:
+        ptoml = params_toml(run_config)
+        return [((), ptoml, params_key(ptoml, config.perception))]
+    if isinstance(run_config, StackParams):      # the same TOML text, so the same key (params_toml)
+        run_config = RunConfig(stack=run_config)
+    if not isinstance(run_config, RunConfig):
+        raise UserError(f"--variant needs a run configuration (a RunConfig), got {type(run_config).__name__}")
+    out, seen = [], {}
+    for combo in combinations(axes):
+        ptoml = params_toml(apply_combination(run_config, combo))
+        phash = params_key(ptoml, config.perception)
+        if phash in seen:                        # cannot happen with distinct values; a guard for new axes
+            raise UserError(f"--variant: {combination_label(combo)} and {combination_label(seen[phash])} give the "
+                            "same run configuration")
+        seen[phash] = combo
+        out.append((combo, ptoml, phash))
+    return out
 
 
 #: plan() draws every seed's world of each scenario up to this many seeds, a sample of this size beyond
@@ -137,6 +166,17 @@ def seed_sample(seeds, size: int = CHECK_ALL_SEEDS) -> list[int]:
     head = size // 2
     spread = [head + round(j * (len(seeds) - 1 - head) / (size - head - 1)) for j in range(size - head)]
     return [seeds[i] for i in sorted(set(range(head)) | set(spread))]
+
+
+def _variant_info(tasks) -> dict | None:
+    """The reports' view of a bench's variants: {"axes": [(axis, [values])], "combinations": [combo],
+    "by_hash": {params_hash: combo}}; None without variants."""
+    by_hash = {t.params_hash: t.variant for t in tasks}
+    combos = list(dict.fromkeys(by_hash.values()))
+    if combos == [()]:
+        return None
+    axes = [(a, list(dict.fromkeys(c[i][1] for c in combos))) for i, (a, _) in enumerate(combos[0])]
+    return {"axes": axes, "combinations": combos, "by_hash": by_hash}
 
 
 def _groups(config: BenchConfig) -> dict[str, dict[str, str]] | None:
@@ -278,10 +318,12 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
     lock = _DirLock(out)
     t0 = time.perf_counter()
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    phash = tasks[0].params_hash
+    params = {t.params_hash: t.params_toml for t in tasks}      # one per variant combination (one without)
+    phash = ",".join(params)                                     # (the runs table's key of this bench)
     try:
         with ResultStore(out / DB_NAME) as store:
-            store.add_params(phash, config.perception, tasks[0].params_toml)
+            for h, text in params.items():
+                store.add_params(h, config.perception, text)
             for t in {t.scenario_sha: t for t in tasks}.values():
                 store.add_scenario(t.scenario_sha, t.scenario, t.scenario_toml)
             done = store.ok_keys()
@@ -314,14 +356,14 @@ def run_bench(config: BenchConfig, *, progress: bool | None = None, report_only:
                                   workers=config.workers or "all", host=socket.gethostname(), episodes_run=ran,
                                   errors=errors_now, wall_time_s=round(wall, 2), completed=completed)
             rows = store.rows([t.key for t in tasks])
-            runs = store.runs(phash)
+            runs = [r for r in store.runs() if set(r["params_hash"].split(",")) <= set(params)]
         info = {"suite": config.suite, "perception": config.perception, "params_hash": phash, "engine": config.engine,
                 "workers": config.workers or (os.cpu_count() if config.engine == "local" else "all")}
         if runs:   # over every invocation that ran episodes of these parameters (a resumed bench has several)
             n, w = sum(r["episodes_run"] for r in runs), sum(r["wall_time_s"] for r in runs)
             info.update(runs=len(runs), wall_time_s=round(w, 1), episodes_per_min=round(60.0 * n / w, 2) if w else None)
         summary = report.write_reports(out, rows, methods, scenarios, list(config.seeds), info,
-                                       groups=_groups(config))
+                                       groups=_groups(config), variants=_variant_info(tasks))
     finally:
         lock.release()
     outcome = BenchOutcome(total=len(tasks), already_done=already, ran=ran,

@@ -9,6 +9,13 @@ carries its 95 % interval and methods are compared on the episodes they share (t
   the two Wilson intervals with the pairs' correlation), and the exact McNemar test's two-sided p-value (the
   binomial test of the discordant pairs, b successes of b + c at 1/2).
 
+- :func:`ratio_ci_pct` / :func:`paired_ratio_difference` -- a pooled fraction of control steps (e.g. the QP
+  infeasible fraction: infeasible steps of all episodes / all their steps) and the paired difference of two such
+  fractions, with 95 % intervals that count the episode, not the step, as the independent unit: the ratio
+  estimator's linearization with the between-episode (cluster) variance (Cochran 1977, Sampling Techniques,
+  Sec. 6.3-6.4), normal quantile, clipped to [0, 100] %. A fraction that is 0 in every episode has the interval
+  [0, 0] (no spread to measure).
+
 Pure Python (math only): the report runs without scipy; the tests check these against scipy's own computations.
 """
 from __future__ import annotations
@@ -81,3 +88,51 @@ def fmt_ci(pct: float | None, ci: Sequence[float] | None, digits: int = 1) -> st
     if ci is None:
         return f"{pct:.{digits}f}"
     return f"{pct:.{digits}f} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]"
+
+
+def _ratio_terms(nums: Sequence[float], dens: Sequence[float]) -> tuple[float, list[float]] | None:
+    """R = sum(nums) / sum(dens) and each cluster's linearized term (y_i - R x_i) / X; None when sum(dens) = 0."""
+    total = float(sum(dens))
+    if total <= 0:
+        return None
+    r = float(sum(nums)) / total
+    return r, [(y - r * x) / total for y, x in zip(nums, dens)]
+
+
+def _clip_pct(lo: float, hi: float) -> list[float]:
+    return [round(100.0 * max(-1.0, lo), 2), round(100.0 * min(1.0, hi), 2)]
+
+
+def ratio_ci_pct(nums: Sequence[float], dens: Sequence[float], z: float = Z95) -> list[float] | None:
+    """The 95 % interval [lo, hi] in % of the pooled fraction sum(nums) / sum(dens) over independent clusters
+    (nums[i] of dens[i] in cluster i; module docstring); None with fewer than 2 clusters or no denominator."""
+    n = len(nums)
+    if len(dens) != n:
+        raise ValueError("numerators and denominators of different lengths")
+    terms = _ratio_terms(nums, dens) if n >= 2 else None
+    if terms is None:
+        return None
+    r, e = terms
+    half = z * math.sqrt(n / (n - 1) * sum(t * t for t in e))
+    lo, hi = _clip_pct(r - half, r + half)
+    return [max(0.0, lo), hi]
+
+
+def paired_ratio_difference(nums: Sequence[float], dens: Sequence[float], ref_nums: Sequence[float],
+                            ref_dens: Sequence[float], z: float = Z95) -> dict:
+    """The difference of two pooled fractions measured on paired clusters (element i of both: the same scene and
+    seed), ``nums/dens - ref_nums/ref_dens``: n, diff_pct and its 95 % interval in percentage points (the
+    linearized terms of both ratios subtracted pair by pair; module docstring). None figures without data."""
+    n = len(nums)
+    if not (len(dens) == len(ref_nums) == len(ref_dens) == n):
+        raise ValueError("paired samples of different lengths")
+    a, b = _ratio_terms(nums, dens), _ratio_terms(ref_nums, ref_dens)
+    out = {"n": n, "diff_pct": None, "ci95_pct": None}
+    if n == 0 or a is None or b is None:
+        return out
+    diff = a[0] - b[0]
+    out["diff_pct"] = round(100.0 * diff, 2)
+    if n >= 2:
+        half = z * math.sqrt(n / (n - 1) * sum((x - y) ** 2 for x, y in zip(a[1], b[1])))
+        out["ci95_pct"] = _clip_pct(diff - half, diff + half)
+    return out

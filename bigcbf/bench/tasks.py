@@ -44,6 +44,9 @@ class EpisodeTask:
     params_toml: str         # the RunConfig as TOML (bigcbf.config.config_toml)
     perception: str = "lidar"
     robot_profile_toml: str | None = None   # the base robot profile's text (None: read the file it names)
+    #: the bench's variant combination, ((axis, value), ...) (bigcbf.bench.variants; () without --variant): a label
+    #: for the reports, not part of the key (its configuration is, through params_hash)
+    variant: tuple[tuple[str, str], ...] = ()
 
     @property
     def key(self) -> tuple[str, str, int, str, str]:

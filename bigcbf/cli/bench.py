@@ -17,6 +17,12 @@ def _suites_help() -> str:
                      f"{'s' if SUITES.get(n).default_seeds != 1 else ''})" for n in SUITES.names())
 
 
+def _variants_help() -> str:
+    """Each registered variant axis with its configuration path and values (the registry is the one list)."""
+    from ..bench.variants import VARIANT_AXES
+    return "; ".join(f"{n}={','.join(a.values)} ({a.path})" for n, a in VARIANT_AXES.items())
+
+
 def _splits_help() -> str:
     from ..bench.suites import SUITES
     return "; ".join(f"{n}: {' or '.join(SUITES.get(n).splits)}" for n in SUITES.names() if SUITES.get(n).splits)
@@ -55,8 +61,12 @@ def add_arguments(p):
                         "the episode key")
     p.add_argument("--route", choices=["on", "off"], default=None,
                    help="every method under the route layer (on) or not (off: the paper's set-up), as the "
-                        "configuration's [route] enabled (default: the configuration's, off); part of the key. Run "
-                        "the bench once with each (two --out folders) to compare all methods with it off and on")
+                        "configuration's [route] enabled (default: the configuration's, off); part of the key. "
+                        "To compare all methods with it off and on in one report: --variant route=off,on")
+    p.add_argument("--variant", action="append", default=None, metavar="NAME=V1,V2",
+                   help="run every method under each of these values of a switch, on the same seeds, and report "
+                        "them side by side with paired differences (repeatable: every combination runs; each "
+                        "combination's configuration is part of the key): " + _variants_help())
     p.add_argument("--perception", default="lidar", metavar="{lidar,truth}",
                    help="obstacles from the LiDAR pipeline (default) or the simulator's truth; part of the key")
     p.add_argument("--report-only", action="store_true",
@@ -95,10 +105,14 @@ def config_from_args(args):
 
     from ..api import bench_config
     from ..bench.suites import SUITES
+    from ..bench.variants import parse_variants
     from ..errors import UserError
     from .argtypes import MAX_SEED
     from .run import stderr_note, with_route
 
+    variants = parse_variants(args.variant)      # before the suite writes its worlds: a typo costs nothing
+    if args.route is not None and any(name == "route" for name, _ in variants):
+        raise UserError("--route and --variant route=... both set the route layer; give one of them")
     if args.seed_list is not None:
         if len(args.seed_list) > MAX_SEEDS:
             raise UserError(f"--seed-list: at most {MAX_SEEDS} seeds in one bench, got {len(args.seed_list)}")
@@ -112,7 +126,7 @@ def config_from_args(args):
     bc = bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
                       workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
                       profile=args.profile, perception=args.perception, split=args.split,
-                      notes=stderr_note)
+                      notes=stderr_note, variants=args.variant)
     return replace(bc, config=with_route(bc.config, args.route))
 
 
