@@ -1,0 +1,135 @@
+"""Issue 25 item 1: encounters (bigcbf/control/encounters.py), big-cbf-plus's encounter commitment and executed-speed
+rules, and the switches-per-encounter metric; big-cbf keeps neither."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bigcbf import run_episode
+from bigcbf.control.big_cbf import BigCbfPlanner, BigCbfPlusPlanner
+from bigcbf.control.encounters import EncounterSideRecorder, EncounterTracker
+from bigcbf.control.executed_speed import SCALES, judge_at_executed_speed, speed_params
+from bigcbf.control.imagination import Imagination, imagine
+from bigcbf.control.selection import BehaviorSelector
+from bigcbf.params.stack import PAPER_RULES, SIMULATION, PlusRules, default_stack_params
+from bigcbf.types import Obstacles, RobotState
+
+P = SIMULATION
+GOAL = (6.0, 0.0)
+
+
+def _post(x, y, ident=0, r=0.2, v=(0.0, 0.0)):
+    return Obstacles.from_lists([[x, y]], v=[v], r=r, ids=[ident])
+
+
+def test_a_post_ahead_is_one_encounter_until_it_is_behind_the_robot():
+    tr = EncounterTracker(P)
+    enc = tr.update(0.0, (0.0, 0.0), GOAL, _post(2.0, 0.0))
+    assert enc is not None and tr.opened == 1
+    # beside it (no longer in the way: the robot moved 0.8 m left) the encounter stays current
+    assert tr.update(1.0, (2.0, 0.8), GOAL, _post(2.0, 0.0)) is enc
+    # 0.4 m behind: not yet behind by its clearance r_R + r + d0 = 0.45 m
+    assert tr.update(1.5, (2.4, 0.5), GOAL, _post(2.0, 0.0)) is enc
+    assert tr.update(2.0, (2.5, 0.3), GOAL, _post(2.0, 0.0)) is None and tr.open == []
+
+
+def test_a_new_track_id_within_the_gate_of_the_predicted_position_inherits_the_encounter():
+    tr = EncounterTracker(P)
+    walker = _post(1.5, 0.0, ident=3, v=(0.4, 0.0))
+    enc = tr.update(0.0, (0.0, 0.0), GOAL, walker)
+    # one second later the walker (predicted at x = 1.9) comes back as track 7 at x = 2.0: the same encounter
+    assert tr.update(1.0, (0.5, 0.0), GOAL, _post(2.0, 0.05, ident=7, v=(0.4, 0.0))) is enc
+    assert enc.ids == frozenset({7})
+    # a track far from every prediction is a new encounter
+    far = tr.update(1.2, (0.5, 0.0), GOAL, _post(3.5, 0.0, ident=9))
+    assert far is not enc and tr.opened == 2
+
+
+def test_posts_the_footprint_cannot_pass_between_are_one_encounter_and_a_lost_one_ends():
+    tr = EncounterTracker(P)
+    pair = Obstacles.from_lists([[2.0, 0.0], [2.0, 0.55]], r=0.2, ids=[0, 1])     # gap 0.15 m
+    enc = tr.update(0.0, (0.0, 0.0), GOAL, pair)
+    assert enc.ids == frozenset({0, 1})
+    assert tr.update(0.5, (0.2, 0.0), GOAL, Obstacles.empty()) is enc          # unseen for 0.5 s: kept
+    assert tr.update(1.6, (0.4, 0.0), GOAL, Obstacles.empty()) is None         # unseen for 1.6 s: lost
+
+
+def _img(accepted, J):
+    modes = ("GOAL", "PASS-L", "PASS-R", "SIDE-L", "SIDE-R")
+    B = len(modes)
+    z = np.zeros(B)
+    return Imagination(modes, np.zeros((B, 2, 2)), np.zeros((B, 2)), np.zeros((B, 1, 3)), z, z, z, z, z, z,
+                       np.array(J, float), np.ones(B, bool), np.array(accepted, bool))
+
+
+def test_the_committed_side_is_kept_until_infeasible_for_k_selections():
+    rules = PlusRules(commit_release_selections=2)
+    sel = BehaviorSelector(P, rules)
+    enc = EncounterTracker(P).update(0.0, (0.0, 0.0), GOAL, _post(2.0, 0.0))
+    # PASS-L is the best: selected, and the encounter commits to the left
+    assert sel.select(0.0, _img([1, 1, 1, 1, 1], [1, 0, 0.5, 2, 2]), enc).mode == "PASS-L" and enc.side == 1
+    # PASS-R far better later: without the rule it would switch; with it, the left side is kept
+    assert sel.select(2.0, _img([1, 1, 1, 1, 1], [1, 0.5, -5, 2, -5]), enc).mode == "PASS-L"
+    # the left side rejected: GOAL (neutral) rather than the right, once
+    assert sel.select(4.0, _img([1, 0, 1, 0, 1], [1, 0.5, -5, 2, -5]), enc).mode == "GOAL"
+    assert enc.blocked == 1 and enc.side == 1
+    # rejected at the second consecutive selection: released, the right side is chosen and committed
+    assert sel.select(6.0, _img([1, 0, 1, 0, 1], [1, 0.5, -5, 2, -5]), enc).mode == "PASS-R" and enc.side == -1
+    # without the rule, the same selector switches to the far better right side at once
+    free = BehaviorSelector(P, PlusRules(encounter_commitment=False, side_commitment=False))
+    enc2 = EncounterTracker(P).update(0.0, (0.0, 0.0), GOAL, _post(2.0, 0.0))
+    assert free.select(0.0, _img([1, 1, 1, 1, 1], [1, 0, 0.5, 2, 2]), enc2).mode == "PASS-L"
+    assert free.select(2.0, _img([1, 1, 1, 1, 1], [1, 0.5, -5, 2, -5]), enc2).mode in ("PASS-R", "SIDE-R")
+
+
+def test_the_papers_big_cbf_keeps_no_encounters_and_judges_at_full_speed():
+    assert not PAPER_RULES.encounter_commitment and not PAPER_RULES.executed_speed
+    assert BigCbfPlanner(P).encounters is None and BigCbfPlanner(P, shared=False).encounters is None
+    plus = BigCbfPlusPlanner(P)
+    assert plus.encounters is not None and plus.rules.executed_speed
+
+
+def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_over_the_same_distance():
+    params = default_stack_params()
+    for s in SCALES:
+        slow = speed_params(params, s)
+        assert slow.v_max_mps == pytest.approx(params.v_max_mps * s)
+        assert slow.N == math.ceil(params.N / s - 1e-9)
+        assert slow.v_max_mps * slow.N * slow.dt_s >= params.v_max_mps * params.N * params.dt_s - 1e-9
+        assert speed_params(params, s) is slow                               # cached
+    st = RobotState(0.0, 0.0, 0.0)
+    obs = Obstacles.from_lists([[1.2, 0.43], [1.2, -0.43]], r=0.15)          # a 0.56 m gap 1.05 m ahead
+    img = imagine(st, obs, (4.0, 0.0), params, rules=PlusRules())
+    out, scale = judge_at_executed_speed(img, st, obs, (4.0, 0.0), params, shared=True, current=None,
+                                         rules=PlusRules())
+    gained = ~img.accepted & out.accepted
+    assert gained.any()
+    assert set(scale[gained]) <= set(SCALES) and np.all(scale[img.accepted] == 1.0)
+    assert np.all(out.h_min[gained] >= -params.eps_h_m2)
+    assert np.all(out.J[img.accepted] == img.J[img.accepted])                # full-speed rows untouched
+
+
+def _recorded(modes_at):
+    rec = EncounterSideRecorder(P)
+    for t, x, mode in modes_at:
+        rec.add(t, RobotState(x, 0.0, 0.0), _post(2.0, 0.0), GOAL, mode)
+    return rec.metrics()
+
+
+def test_side_switches_are_counted_per_encounter():
+    # L, GOAL, R, L while the post is ahead: 2 switches in 1 encounter; once it is behind, nothing counts
+    m = _recorded([(0.0, 0.0, "PASS-L"), (0.5, 0.2, "GOAL"), (1.0, 0.4, "SIDE-R"), (1.5, 0.6, "PASS-L"),
+                   (2.0, 3.0, "PASS-R")])
+    assert m == dict(encounters=1, encounter_side_switches=2, switches_per_encounter=2.0)
+    assert _recorded([(0.0, 0.0, "GOAL")]) == dict(encounters=0, encounter_side_switches=0,
+                                                    switches_per_encounter=0.0)
+
+
+def test_episodes_report_switches_per_encounter_only_for_methods_with_sides():
+    plus = run_episode("required_sidestepping", "big-cbf-plus", 0, time_limit_s=3.0)
+    assert isinstance(plus.encounters, int) and isinstance(plus.switches_per_encounter, float)
+    assert plus.encounters >= 1                     # the wide obstacle on the goal line is passed on one side
+    dwa = run_episode("required_sidestepping", "dwa", 0, time_limit_s=2.0)
+    assert dwa.encounters is None and dwa.encounter_side_switches is None and dwa.switches_per_encounter is None
