@@ -15,7 +15,8 @@ import sys
 from ..errors import UserError
 
 #: Subcommands, in the order ``bigcbf --help`` lists them.
-COMMANDS = ["scenarios", "methods", "run", "demo", "perf", "record", "calibrate", "replay", "profile", "bench"]
+COMMANDS = ["scenarios", "methods", "run", "demo", "perf", "record", "calibrate", "replay", "profile", "bench", "sim",
+            "filter", "tune"]
 
 
 class _Parser(argparse.ArgumentParser):
