@@ -37,7 +37,9 @@ off, every default), so the keys of the paper's set-up do not change with it.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,12 +70,13 @@ class RunConfig:
     perception: PerceptionParams = PerceptionParams()
     pedestrians: SocialForceParams = SocialForceParams()
     #: method name -> its parameters (an instance of the method's ``params_type``); methods not listed use
-    #: their defaults
-    methods: dict[str, Any] = field(default_factory=dict)
+    #: their defaults. Default: the shipped tuned configuration's, when one is shipped (:data:`TUNED_PATH`)
+    methods: dict[str, Any] = field(default_factory=lambda: dict(shipped_tuned()[0]))
     #: the route layer (bigcbf/control/route.py) under every method; off by default (the paper's set-up)
     route: RouteParams = RouteParams()
     #: method name -> its stack keys over ``stack`` (a partial StackParams table, ``[methods.NAME.stack]``)
-    method_stacks: dict[str, dict] = field(default_factory=dict)
+    #: (default: the shipped tuned configuration's, when one is shipped)
+    method_stacks: dict[str, dict] = field(default_factory=lambda: copy.deepcopy(shipped_tuned()[1]))
 
     def stack_for(self, method: str | None) -> StackParams:
         """The stack parameters of ``method``'s episodes: ``stack`` with its ``[methods.NAME.stack]`` keys."""
@@ -90,6 +93,41 @@ class RunConfig:
 
     def replace(self, **changes) -> "RunConfig":
         return dataclasses.replace(self, **changes)
+
+
+#: the shipped tuned run configuration (``bigcbf tune --write-shipped``; docs/tuning.md): when the file exists, its
+#: ``[methods.NAME]`` tables (each method's chosen configuration, the grid's hash and the commit in its first lines)
+#: are the defaults of ``RunConfig()``, i.e. of every front door; :func:`untuned` is the configuration without them
+TUNED_PATH = Path(__file__).resolve().parent / "params" / "tuning" / "tuned.toml"
+
+
+@functools.lru_cache(maxsize=1)
+def shipped_tuned() -> tuple[dict, dict]:
+    """(methods, method_stacks) of the shipped tuned configuration; empty when none is shipped. It holds
+    ``[methods.NAME]`` tables only (a UserError naming the file otherwise)."""
+    if not TUNED_PATH.is_file():
+        return {}, {}
+    data = load_toml(TUNED_PATH)
+    for key in data:
+        if key != "methods":
+            raise UserError("a tuned configuration holds [methods.NAME] tables only", file=str(TUNED_PATH), field=key)
+    cfg = run_config_from_dict(data, file=str(TUNED_PATH), base=untuned())
+    return cfg.methods, cfg.method_stacks
+
+
+def tuned_provenance() -> str | None:
+    """The shipped tuned configuration's provenance line (grid hash and commit), None when none is shipped."""
+    if not TUNED_PATH.is_file():
+        return None
+    for line in TUNED_PATH.read_text().splitlines():
+        if line.startswith("# Provenance:"):
+            return line[2:]
+    return "Provenance: unknown (no provenance line)"
+
+
+def untuned() -> RunConfig:
+    """RunConfig() without the shipped tuned configuration: every method at its authors' (the dataclass) defaults."""
+    return RunConfig(methods={}, method_stacks={})
 
 
 def _merge(base: dict, over: dict) -> dict:

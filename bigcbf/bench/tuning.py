@@ -227,8 +227,8 @@ def load_grid(path: str | Path = GRID) -> Grid:
 
 def _check_defaults(grid: Grid, mg: MethodGrid) -> None:
     """Every configuration loads as a run configuration, and configuration 0 is the code's defaults."""
-    from ..config import RunConfig
-    base = RunConfig()
+    from ..config import untuned
+    base = untuned()
     for i in range(len(mg.configs)):
         rc = run_config(grid, mg, i)
         if i == 0:
@@ -263,9 +263,10 @@ def method_table(mg: MethodGrid, index: int) -> dict:
 
 
 def run_config(grid: Grid, mg: MethodGrid, index: int, base=None):
-    """The run configuration of ``mg``'s configuration ``index`` (over ``base``, default RunConfig()), for the
-    method and the methods that share its choice."""
-    from ..config import run_config_from_dict
+    """The run configuration of ``mg``'s configuration ``index`` (over ``base``, default the untuned defaults:
+    :func:`bigcbf.config.untuned`), for the method and the methods that share its choice."""
+    from ..config import run_config_from_dict, untuned
+    base = untuned() if base is None else base
     table = method_table(mg, index)
     shared = {m: {"stack": table["stack"]} for m in mg.shared_by if "stack" in table}
     return run_config_from_dict({"methods": {mg.method: table, **shared}}, file=str(grid.path), base=base)
@@ -320,7 +321,7 @@ def plan_arms(grid: Grid, out: Path, methods=None, configs=None, **world_kwargs)
     """The search's arms: every (method, configuration) of ``methods`` (default: every method of the grid) and
     ``configs`` (indices, default all), each with its episode tasks on the subset's worlds (the bench's tasks, with
     the arm's run configuration in their key)."""
-    from ..config import RunConfig
+    from ..config import untuned
     from .runner import BenchConfig, plan
     from .tasks import params_key, params_toml
 
@@ -336,7 +337,7 @@ def plan_arms(grid: Grid, out: Path, methods=None, configs=None, **world_kwargs)
         raise UserError(f"configurations are numbered 0-{BUDGET - 1}, got {bad}")
     paths = dev_worlds(grid, out, **world_kwargs)
     base, _, _ = plan(BenchConfig(out=out, methods=tuple(methods), scenarios=tuple(str(p) for p in paths),
-                                  seeds=(grid.episode_seed,), config=RunConfig()))
+                                  seeds=(grid.episode_seed,), config=untuned()))
     arms = []
     for m in methods:
         mine = [t for t in base if t.method == m]

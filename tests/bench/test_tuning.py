@@ -126,6 +126,32 @@ def test_tiny_real_search(tmp_path, capsys):
     # a slice is never shipped
     with pytest.raises(UserError, match="slice"):
         tuning.write_shipped(out, load_grid())
+    _shipped_file_is_the_default(out / "tuned.toml", alpha)
+
+
+def _shipped_file_is_the_default(tuned_file, alpha):
+    """A shipped tuned file (here the tiny search's, in place of bigcbf/params/tuning/tuned.toml) gives RunConfig()
+    -- every front door -- its methods' defaults; untuned() stays at the authors' defaults."""
+    from bigcbf import config
+    from bigcbf.params.stack import default_stack_params
+
+    old = config.TUNED_PATH
+    config.shipped_tuned.cache_clear()
+    try:
+        config.TUNED_PATH = tuned_file
+        assert RunConfig().stack_for("cbf-only").alpha_per_s == alpha
+        assert RunConfig().stack_for("big-cbf") == default_stack_params()
+        assert config.untuned().stack_for("cbf-only").alpha_per_s == default_stack_params().alpha_per_s
+        assert "grid.toml sha256" in config.tuned_provenance()
+        bad = tuned_file.parent / "bad_tuned.toml"
+        bad.write_text("[stack]\nalpha_per_s = 2.0\n")
+        config.TUNED_PATH = bad
+        config.shipped_tuned.cache_clear()
+        with pytest.raises(UserError, match="bad_tuned.toml.*methods.NAME"):
+            RunConfig()
+    finally:
+        config.TUNED_PATH = old
+        config.shipped_tuned.cache_clear()
 
 
 @pytest.mark.parametrize("extra, words", [
