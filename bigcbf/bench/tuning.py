@@ -49,10 +49,12 @@ from ..errors import UserError
 
 TUNING_DIR = Path(__file__).resolve().parent.parent / "params" / "tuning"
 GRID = TUNING_DIR / "grid.toml"
+#: every tuned method at its authors' defaults (configuration 0), as a run configuration (:func:`defaults_toml`)
+DEFAULTS = TUNING_DIR / "defaults.toml"
 #: what --write-shipped writes (the shipped tuned run configuration and the search's results)
 SHIPPED = {"tuned.toml": TUNING_DIR / "tuned.toml", "tuning.csv": TUNING_DIR / "results.csv",
            "tuning.json": TUNING_DIR / "results.json"}
-OUTPUTS = ("results.sqlite", "tuning.csv", "tuning.json", "tuned.toml")
+OUTPUTS = ("results.sqlite", "tuning.csv", "tuning.json", "tuned.toml", "defaults.toml")
 #: the budget of the protocol: configurations per method, the defaults among them
 BUDGET = 8
 SCALES = ("linear", "log")
@@ -531,6 +533,23 @@ def tuned_toml(grid: Grid, res: dict) -> str:
     return text + ("\n" + tomli_w.dumps({"methods": tables}) if tables else "")
 
 
+def defaults_toml(grid: Grid) -> str:
+    """Every method of the grid at configuration 0, its authors' defaults, as a run configuration: with a tuned file
+    shipped (the default then), ``--config`` this file to run the defaults (shipped as
+    bigcbf/params/tuning/defaults.toml)."""
+    import tomli_w
+    tables: dict = {}
+    for m, mg in grid.methods.items():
+        tables[m] = method_table(mg, 0)
+        for other in mg.shared_by:
+            if "stack" in tables[m]:
+                tables[other] = {"stack": tables[m]["stack"]}
+    return (f"# The authors' defaults of every tuned method (configuration 0 of each in {grid.path.name}, sha256 "
+            f"{grid.sha}),\n# as a run configuration: `bigcbf bench --config` this file to run them when a tuned "
+            "configuration is shipped.\n# Written by bigcbf.bench.tuning.defaults_toml (docs/tuning.md).\n\n"
+            + tomli_w.dumps({"methods": tables}))
+
+
 def write_outputs(out: Path, grid: Grid, res: dict) -> None:
     """tuning.csv, tuning.json and tuned.toml into ``out`` (atomically); tuned.toml is read back as a run
     configuration."""
@@ -539,6 +558,7 @@ def write_outputs(out: Path, grid: Grid, res: dict) -> None:
     write_text(out / "tuning.csv", results_csv(res), "tuning results")
     write_text(out / "tuning.json", strict_json(res, indent=1) + "\n", "tuning results")
     write_text(out / "tuned.toml", tuned_toml(grid, res), "tuned run configuration")
+    write_text(out / "defaults.toml", defaults_toml(grid), "defaults run configuration")
     load_run_config(out / "tuned.toml")
 
 

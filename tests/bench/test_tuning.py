@@ -164,3 +164,13 @@ def test_bad_arguments_are_one_line(tmp_path, capsys, extra, words):
     assert main(["tune", "--out", str(tmp_path / "o")] + extra) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1
+
+
+def test_shipped_defaults_file_is_the_authors_defaults():
+    """bigcbf/params/tuning/defaults.toml is made from the grid and runs every method as untuned() does."""
+    from bigcbf.config import untuned
+    g = load_grid()
+    assert tuning.DEFAULTS.read_text() == tuning.defaults_toml(g)
+    cfg, base = load_run_config(tuning.DEFAULTS, base=untuned()), untuned()
+    for m in METHODS.names():
+        assert cfg.stack_for(m) == base.stack_for(m) and cfg.method_params(m) == base.method_params(m)
