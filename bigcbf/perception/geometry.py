@@ -1,12 +1,18 @@
 """Scan geometry: beams to points in odom, scan-order clustering, circle and rectangle fits, wall points.
 
-Pure numpy; no simulator import (this runs on the robot).
+Numpy, and compiled kernels (``bigcbf.control.jit.kernel``) for the per-point loops of clustering, the compactness
+test and the wall points; no simulator import (this runs on the robot). The kernels keep the numpy arithmetic's
+order (sums as numpy's pairwise ``add.reduce``/``reduceat``, cumulative sums in order, transcendental functions
+left to numpy): the results are the bits of the numpy code they replaced (tests/perception/test_geometry_compiled.py).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..control.jit import kernel
 
 from ..params.perception import PerceptionParams
 from ..types import LaserScan
@@ -76,38 +82,67 @@ def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
         return []
     if n == 1:
         return [Cluster(np.array([0]), False)]
-    p = sp.xy
-    nxt = np.roll(np.arange(n), -1)
-    d = np.linalg.norm(p[nxt] - p, axis=1)                                  # d[i] = |p[i+1] - p[i]|
-    dbeam = (sp.beam[nxt] - sp.beam) % sp.n_beams
-    dbeam[dbeam == 0] = sp.n_beams
-    dphi = sp.angle_increment
     lam = params.cluster_lambda_rad
-    # the adaptive distance only between adjacent beams: across missed beams there is free space between the points
-    abd = np.where((dbeam == 1) & (dphi < lam),
-                   sp.ranges * np.sin(dphi) / np.sin(max(lam - dphi, 1e-9))
-                   + 3 * (params.range_sigma_m + params.range_sigma_frac * sp.ranges), 0.0)
-    join = d <= np.maximum(params.cluster_dist_m, abd)
-    if join.all():
+    dphi = sp.angle_increment
+    order, bounds, occ = _cluster_kernel(np.ascontiguousarray(sp.xy), np.ascontiguousarray(sp.ranges, dtype=float),
+                                         np.ascontiguousarray(sp.beam, dtype=np.int64), int(sp.n_beams), dphi, lam,
+                                         float(np.sin(dphi)), float(np.sin(max(lam - dphi, 1e-9))),
+                                         float(params.cluster_dist_m), float(params.range_sigma_m),
+                                         float(params.range_sigma_frac))           # (numpy's sines, as before)
+    if len(bounds) == 0:
         return [Cluster(np.arange(n), False)]
-    # rotate so the scan starts right after a break; then cluster labels are a cumulative sum of breaks
-    start = (int(np.flatnonzero(~join)[0]) + 1) % n
-    order = np.roll(np.arange(n), -start)
-    breaks = ~join[order]                                                    # break after order[k]
-    labels = np.concatenate([[0], np.cumsum(breaks[:-1])])
-    bounds = np.flatnonzero(np.diff(labels)) + 1
-    out = []
-    for seg in np.split(order, bounds):
-        first, last = seg[0], seg[-1]
+    return [Cluster(seg, bool(o)) for seg, o in zip(np.split(order, bounds), occ)]
+
+
+@kernel
+def _cluster_kernel(p, ranges, beam, n_beams, dphi, lam, sin_dphi, sin_rest, cluster_dist, sigma_r, sigma_frac):
+    """:func:`cluster_points`'s joins and segments: returns the scan order rotated to start after a break (n,),
+    the segment bounds into it (none: one cluster of every point, in scan order) and each segment's occlusion
+    flag. The numpy formulation's arithmetic, point by point."""
+    n = p.shape[0]
+    join = np.empty(n, np.bool_)
+    first_break = -1
+    for i in range(n):
+        j = i + 1 if i + 1 < n else 0
+        dx, dy = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1]
+        d = math.sqrt(dx * dx + dy * dy)
+        db = (beam[j] - beam[i]) % n_beams
+        if db == 0:
+            db = n_beams
+        abd = 0.0
+        if db == 1 and dphi < lam:
+            abd = ranges[i] * sin_dphi / sin_rest + 3 * (sigma_r + sigma_frac * ranges[i])
+        thr = cluster_dist if cluster_dist >= abd else abd
+        join[i] = d <= thr
+        if not join[i] and first_break < 0:
+            first_break = i
+    if first_break < 0:
+        return np.arange(n), np.zeros(0, np.int64), np.zeros(0, np.bool_)
+    start = (first_break + 1) % n
+    order = np.empty(n, np.int64)
+    for k in range(n):
+        order[k] = (k + start) % n
+    nb = 0
+    for k in range(n - 1):
+        if not join[order[k]]:
+            nb += 1
+    bounds = np.empty(nb, np.int64)
+    nb = 0
+    for k in range(n - 1):
+        if not join[order[k]]:
+            bounds[nb] = k + 1
+            nb += 1
+    occ = np.zeros(nb + 1, np.bool_)
+    for s in range(nb + 1):
+        lo = 0 if s == 0 else bounds[s - 1]
+        hi = n - 1 if s == nb else bounds[s] - 1
+        first, last = order[lo], order[hi]
         prev, nextp = (first - 1) % n, (last + 1) % n
-        occ = False
-        # a nearer return on the adjacent beam hides part of this cluster
-        if (sp.beam[first] - sp.beam[prev]) % sp.n_beams == 1 and sp.ranges[prev] < sp.ranges[first]:
-            occ = True
-        if (sp.beam[nextp] - sp.beam[last]) % sp.n_beams == 1 and sp.ranges[nextp] < sp.ranges[last]:
-            occ = True
-        out.append(Cluster(seg, occ))
-    return out
+        if (beam[first] - beam[prev]) % n_beams == 1 and ranges[prev] < ranges[first]:
+            occ[s] = True
+        if (beam[nextp] - beam[last]) % n_beams == 1 and ranges[nextp] < ranges[last]:
+            occ[s] = True
+    return order, bounds, occ
 
 
 def _norms(v: np.ndarray) -> np.ndarray:
@@ -561,36 +596,61 @@ def wall_candidates_many(point_sets: list, robot_xy: np.ndarray, spacing: float)
     sets = [q for q in point_sets if len(q)]
     if not sets:
         return np.zeros((0, 2))
-    n = np.array([len(q) for q in sets])
-    m = len(sets)
-    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-    ends = starts + n - 1
-    Q = np.concatenate(sets)
-    N = len(Q)
-    g = np.repeat(np.arange(m), n)
-    dx, dy = Q[:, 0] - robot_xy[0], Q[:, 1] - robot_xy[1]
-    d2 = dx * dx + dy * dy
-    dmin = np.minimum.reduceat(d2, starts)
-    ar = np.arange(N)
-    j = np.minimum.reduceat(np.where(d2 == dmin[g], ar, N), starts)          # first nearest point per cluster
-    step = np.zeros(N)
-    if N > 1:
-        e = np.diff(Q, axis=0)
-        step[1:] = np.sqrt(e[:, 0] ** 2 + e[:, 1] ** 2)
-    step[starts] = 0.0
-    cs = np.cumsum(step)
-    s_ = cs - cs[starts][g]
-    bins = np.floor(np.abs(s_ - s_[j][g]) / spacing)
-    jg = j[g]
-    keep = np.zeros(N, bool)
-    fwd = (ar > jg)
-    keep[fwd] = bins[fwd] != bins[ar[fwd] - 1]
-    bwd = (ar < jg)
-    keep[bwd] = bins[bwd] != bins[ar[bwd] + 1]
-    keep[j] = keep[starts] = keep[ends] = True
-    sel = np.flatnonzero(keep)
-    order = np.lexsort((sel, sel != jg[sel], g[sel]))
-    return Q[sel[order]]
+    n = np.array([len(q) for q in sets], np.int64)
+    Q = np.ascontiguousarray(np.concatenate(sets), dtype=float)
+    return Q[_wall_candidates_kernel(Q, n, float(robot_xy[0]), float(robot_xy[1]), float(spacing))]
+
+
+@kernel
+def _wall_candidates_kernel(Q, n, rx, ry, spacing):
+    """The indices into Q of :func:`wall_candidates_many`'s points, cluster by cluster (n[c] points each), each
+    one's nearest point first; the path length is one cumulative sum over all of Q, as in numpy."""
+    N = Q.shape[0]
+    cs = np.empty(N)             # the cumulative sum of the steps, 0 at each cluster's first point
+    acc = 0.0
+    nxt_start, c = 0, 0
+    for i in range(N):
+        if i == nxt_start:
+            nxt_start += n[c]
+            c += 1
+        else:
+            ex, ey = Q[i, 0] - Q[i - 1, 0], Q[i, 1] - Q[i - 1, 1]
+            acc += math.sqrt(ex ** 2 + ey ** 2)
+        cs[i] = acc
+    out = np.empty(N, np.int64)
+    k = 0
+    start = 0
+    for c in range(n.shape[0]):
+        m = n[c]
+        end = start + m - 1
+        j = start
+        best = np.inf
+        for i in range(start, end + 1):
+            d2 = (Q[i, 0] - rx) * (Q[i, 0] - rx) + (Q[i, 1] - ry) * (Q[i, 1] - ry)
+            if d2 < best:
+                best, j = d2, i
+        base = cs[start]
+        sj = cs[j] - base
+        out[k] = j
+        k += 1
+        prev_bin = 0.0
+        for i in range(start, end + 1):
+            b_i = math.floor(abs((cs[i] - base) - sj) / spacing)
+            if i == j:
+                prev_bin = b_i
+                continue
+            keep = i == start or i == end
+            if i > j:
+                keep = keep or b_i != prev_bin
+            elif i < j:
+                b_next = math.floor(abs((cs[i + 1] - base) - sj) / spacing)
+                keep = keep or b_i != b_next
+            if keep:
+                out[k] = i
+                k += 1
+            prev_bin = b_i
+        start = end + 1
+    return out[:k]
 
 
 def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np.ndarray:
@@ -602,15 +662,35 @@ def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np
     if m == 0:
         return np.zeros(0, bool)
     limit = params.compact_max_extent_m
-    n = np.array([len(c.idx) for c in clusters])
-    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-    P = sp.xy[np.concatenate([c.idx for c in clusters])]
-    first = P[starts][np.repeat(np.arange(m), n)]
-    d = np.sqrt((P[:, 0] - first[:, 0]) ** 2 + (P[:, 1] - first[:, 1]) ** 2)
-    e1 = np.maximum.reduceat(d, starts)
-    ok = (n >= params.min_points) & (e1 <= limit)
-    for k in np.flatnonzero(ok & (e1 > limit / 2) & (n <= 400)):
-        ok[k] = extent(P[starts[k]: starts[k] + n[k]], limit) <= limit
+    n = np.array([len(c.idx) for c in clusters], np.int64)
+    P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])])
+    return _compact_kernel(P, n, float(limit), int(params.min_points))
+
+
+@kernel
+def _compact_kernel(P, n, limit, min_points):
+    """:func:`compact_mask` over the concatenated points P of clusters of n[c] points (:func:`extent` inlined)."""
+    m = n.shape[0]
+    ok = np.zeros(m, np.bool_)
+    start = 0
+    for c in range(m):
+        k = n[c]
+        fx, fy = P[start, 0], P[start, 1]
+        e1 = -np.inf
+        for i in range(start, start + k):
+            d = math.sqrt((P[i, 0] - fx) ** 2 + (P[i, 1] - fy) ** 2)
+            e1 = d if d > e1 or d != d else e1
+        ok[c] = k >= min_points and e1 <= limit
+        if ok[c] and e1 > limit / 2 and k <= 400:     # extent(): the pairwise distances
+            best = -np.inf
+            for i in range(start, start + k):
+                for j in range(start, start + k):
+                    dx = P[i, 0] - P[j, 0]
+                    dy = P[i, 1] - P[j, 1]
+                    v = dx * dx + dy * dy
+                    best = v if v > best or v != v else best
+            ok[c] = math.sqrt(best) <= limit
+        start += k
     return ok
 
 
