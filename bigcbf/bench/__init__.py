@@ -6,6 +6,7 @@
 - :mod:`.report`: aggregation, episodes.csv, summary.json/.md, figures.
 - :mod:`.runner`: :func:`run_bench` ties them together.
 - :mod:`.paper`: the paper's Table II and quoted per-scenario numbers.
+- :mod:`.variants`: the switches ``--variant NAME=V1,V2`` compares (every method under every combination).
 
 Kept import-light: a spawned worker imports this package before it runs anything.
 """

@@ -213,3 +213,17 @@ def test_the_step_fraction_interval_counts_episodes_not_steps():
     assert same["diff_pct"] == 0.0 and same["ci95_pct"] == [0.0, 0.0]
     more = paired_ratio_difference([x + 5 for x in nums], dens, nums, dens)
     assert more["diff_pct"] > 0 and more["ci95_pct"][0] > 0 and more["n"] == 200
+
+
+def test_a_suite_with_families_reports_each_method_under_each_variant(tmp_path):
+    """francis2023 (a family per archetype) with fake episodes: the per-family tables and the heatmap rows are
+    the methods under each variant."""
+    cfg = bigcbf.bench_config(tmp_path / "o", methods=["dwa", "cbf-only"], suite="francis2023", seeds=1, workers=1,
+                              variants=["route=off,on"])
+    out = run_bench(cfg, episode_fn=testing.fake_episode, progress=False, log=lambda _: None)
+    arms = [f"{m} [route={v}]" for m in ("cbf-only", "dwa") for v in ("off", "on")]
+    assert out.errors == 0 and list(out.summary["by_family"]) == arms
+    assert out.summary["variants"]["by_method"]["dwa"]["route=on"]["ok"] == len(cfg.scenarios)
+    md = (tmp_path / "o" / "summary.md").read_text()
+    assert "| DWA + CBF [route=on] | frontal_approach | 1 |" in md and "| DWA + CBF [route=on] | all | 13 |" in md
+    assert (tmp_path / "o" / "success_heatmap.png").stat().st_size > 0
