@@ -40,7 +40,10 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
-import tomllib
+try:
+    import tomllib
+except ModuleNotFoundError:      # Python 3.10: tomli is the same parser (bigcbf/params/toml_io.py)
+    import tomli as tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any

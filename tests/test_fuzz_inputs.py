@@ -93,6 +93,8 @@ def stand_ins(monkeypatch):
     monkeypatch.setattr(bigcbf.bench.engines, "run", _reach)
     monkeypatch.setattr(bigcbf.bench.report, "write_reports", _reach)
     monkeypatch.setattr(bigcbf.logio.live, "LiveWriter", _reach)      # run --live: no server on a real port
+    import bigcbf.ros2.transport
+    monkeypatch.setattr(bigcbf.ros2.transport, "Node", _reach)         # sim/filter --ros2: no DDS participant
     for spec in BENCHES:
         mod, fn = spec.split(":")
         monkeypatch.setattr(importlib.import_module(mod), fn, _reach)
@@ -409,6 +411,14 @@ CLI = {
                    "--seeds": "num", "--seed-list": "num", "--workers": "num", "--engine": "word",
                    "--ray-address": "word", "--config": "file", "--profile": "file", "--perception": "word",
                    "--report-only": None, "--docs": "file", "--progress": "word", "--route": "word"}),
+    "sim": (["scenario"], {"--ros2": None, "--domain-id": "num", "--loopback": None, "--lockstep": None,
+                           "--seed": "num", "--config": "file", "--robot-profile": "file", "--time-limit": "num",
+                           "--speed": "num", "--cmd-timeout": "num", "--wait": "num", "--json": None}),
+    "filter": ([], {"--ros2": None, "--domain-id": "num", "--loopback": None, "--lockstep": None, "--method": "word",
+                    "--profile": "file", "--seed": "num", "--goal": "word", "--scan-topic": "word",
+                    "--odom-topic": "word", "--cmd-topic": "word", "--cmd-in-topic": "word", "--goal-topic": "word",
+                    "--stamped": None, "--markers": None, "--scan-timeout": "num", "--odom-timeout": "num",
+                    "--overrun-ms": "num", "--idle-exit": "num", "--json": None}),
 }
 #: `bigcbf scenarios generate`'s options
 GENERATE = {"--seed": "num", "--out": "out", "--force": None, "--list": None}

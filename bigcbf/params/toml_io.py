@@ -13,11 +13,15 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import tomllib
 import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
+
+try:
+    import tomllib
+except ModuleNotFoundError:      # Python 3.10 (a robot's ROS 2 Humble, bigcbf filter): tomli is the same parser
+    import tomli as tomllib
 
 import tomli_w
 
