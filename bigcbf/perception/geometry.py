@@ -424,38 +424,13 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     if m == 0:
         return [], np.zeros(0)
     pr = params
-    n = np.array([len(c.idx) for c in clusters])
+    n = np.array([len(c.idx) for c in clusters], np.int64)
     starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-    idx = np.concatenate([c.idx for c in clusters])
-    g = np.repeat(np.arange(m), n)
-    P = sp.xy[idx]
-    px, py = P[:, 0], P[:, 1]
+    P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])], dtype=float)
     sensor = sp.sensor
-    dx, dy = px - sensor[0], py - sensor[1]
-    dist = np.sqrt(dx * dx + dy * dy)
-    # nearest point of each cluster (the first one at the minimum, as np.argmin)
-    dmin = np.minimum.reduceat(dist, starts)
-    cand = np.where(dist == dmin[g], np.arange(len(idx)), len(idx))
-    k_near = np.minimum.reduceat(cand, starts)
-    near = P[k_near]
-    ray = (near - sensor) / np.maximum(dmin, 1e-9)[:, None]
-    sigma = pr.range_sigma_m + pr.range_sigma_frac * np.add.reduceat(dist, starts) / n
-    # algebraic (Kasa) circle fits, as fit_circle
-    mean = np.add.reduceat(P, starts) / n[:, None]
-    u, v = px - mean[g, 0], py - mean[g, 1]
-    uu, vv, uv = u * u, v * v, u * v
-    suu, svv, suv = np.add.reduceat(uu, starts), np.add.reduceat(vv, starts), np.add.reduceat(uv, starts)
-    w = uu + vv
-    b1, b2 = 0.5 * np.add.reduceat(u * w, starts), 0.5 * np.add.reduceat(v * w, starts)
-    det = suu * svv - suv * suv
-    good = (n >= 3) & (det > 1e-10 * (suu + svv) ** 2)
-    sdet = np.where(good, det, 1.0)
-    uc = np.where(good, (svv * b1 - suv * b2) / sdet, 0.0)
-    vc = np.where(good, (suu * b2 - suv * b1) / sdet, 0.0)
-    r = np.where(good, np.sqrt(uc * uc + vc * vc + (suu + svv) / n), np.inf)
-    c = mean + np.stack([uc, vc], axis=1)
-    res = np.sqrt((u - uc[g]) ** 2 + (v - vc[g]) ** 2) - np.where(good, r, 0.0)[g]
-    rms = np.where(good, np.sqrt(np.add.reduceat(res * res, starts) / n), np.inf)
+    # nearest points, range noise, algebraic (Kasa) circle fits and their residuals, as fit_circle (compiled)
+    near, ray, sigma, c, r, rms = _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m),
+                                             float(pr.range_sigma_frac))
     behind = np.einsum("ij,ij->i", ray, c - near) > 0
     fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
     tol = np.where(fitted, sigma, 0.0)
@@ -465,10 +440,10 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         cj, rmsj = fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
         c[j], r[j], rms[j] = cj, rj, rmsj
     behind = np.einsum("ij,ij->i", ray, c - near) > 0
-    # arc span seen from the centre, as measure_compact
-    u2x, u2y = px - c[g, 0], py - c[g, 1]
-    midx, midy = np.add.reduceat(u2x, starts) / n, np.add.reduceat(u2y, starts) / n
-    ang = np.arctan2(u2x * midy[g] - u2y * midx[g], u2x * midx[g] + u2y * midy[g])
+    # arc span seen from the centre, as measure_compact (numpy's arctan2 of compiled arguments)
+    ay, ax, A, dents = _arc_terms(P, n, c, float(sensor[0]), float(sensor[1]), float(sp.angle_increment),
+                                  float(pr.range_sigma_m), float(pr.range_sigma_frac))
+    ang = np.arctan2(ay, ax)
     span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
     dc = np.linalg.norm(c - sensor, axis=1)
     rr = np.where(np.isfinite(r), r, 1.0)
@@ -477,30 +452,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     occluded = np.array([cl.occluded for cl in clusters])
     need = np.where(occluded, pr.fit_min_arc_rad,
                     np.maximum(pr.fit_min_arc_rad, pr.fit_span_ratio * 2 * sampled))
-    # point weights for the circle covariances (point_variances with the outward normals)
-    d2 = np.maximum(np.sqrt(u2x * u2x + u2y * u2y), 1e-12)
-    nx, ny = u2x / d2, u2y / d2
-    cos = (dx * nx + dy * ny) / np.maximum(dist, 1e-12)
-    cos2 = np.minimum(cos * cos, 1.0)
-    sr = pr.range_sigma_m + pr.range_sigma_frac * dist
-    wt = 1.0 / np.maximum(sr * sr * cos2 + (dist * sp.angle_increment) ** 2 / 12.0 * (1.0 - cos2), 1e-12)
-    a11, a12, a22 = (np.add.reduceat(wt * nx * nx, starts), np.add.reduceat(wt * nx * ny, starts),
-                     np.add.reduceat(wt * ny * ny, starts))
-    a13, a23, a33 = np.add.reduceat(wt * nx, starts), np.add.reduceat(wt * ny, starts), np.add.reduceat(wt, starts)
-    # dents (concavity, k = 2): the point two ahead against the chord from two before to two after
-    dents = np.zeros(m)
-    N = len(idx)
-    if N > 4:
-        ia = np.arange(N - 4)
-        same = g[ia] == g[ia + 4]
-        if same.any():
-            ia = ia[same]
-            a_, b_, c_ = P[ia], P[ia + 2], P[ia + 4]
-            ex, ey = c_[:, 0] - a_[:, 0], c_[:, 1] - a_[:, 1]
-            length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
-            side_b = ex * (b_[:, 1] - a_[:, 1]) - ey * (b_[:, 0] - a_[:, 0])
-            side_s = ex * (sensor[1] - a_[:, 1]) - ey * (sensor[0] - a_[:, 0])
-            np.maximum.at(dents, g[ia], -np.sign(side_s) * side_b / length)
+    a11, a12, a22, a13, a23, a33 = A
     out = []
     for j in range(m):
         pts = P[starts[j]: starts[j] + n[j]]
@@ -522,6 +474,145 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         out.append(Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
                                float(rms_rect), float(sigma[j])))
     return out, dents
+
+
+@kernel
+def _pairwise(a, lo, n):
+    """numpy's pairwise summation of a[lo:lo+n] (``pairwise_sum`` of numpy/_core/src/umath/loops_utils.h: blocks
+    of 8 partial sums up to 128 elements, halves beyond)."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    if n <= 128:
+        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+        i = 8
+        while i < n - (n % 8):
+            r0 += a[lo + i]
+            r1 += a[lo + i + 1]
+            r2 += a[lo + i + 2]
+            r3 += a[lo + i + 3]
+            r4 += a[lo + i + 4]
+            r5 += a[lo + i + 5]
+            r6 += a[lo + i + 6]
+            r7 += a[lo + i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[lo + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise(a, lo, n2) + _pairwise(a, lo + n2, n - n2)
+
+
+@kernel
+def _segsum(a, lo, n):
+    """``np.add.reduceat``'s sum of one segment a[lo:lo+n]: its first element plus the pairwise sum of the rest."""
+    return a[lo] + _pairwise(a, lo + 1, n - 1)
+
+
+@kernel
+def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac):
+    """The first block of :func:`measure_clusters` over clusters of n[c] points of P: each one's nearest point and
+    the unit ray to it, the range-noise std at its mean range, and its algebraic circle fit (centre, radius, RMS
+    residual; inf radius and rms for (near-)collinear points), in the numpy formulation's order (sums as
+    ``np.add.reduceat``)."""
+    m, N = n.shape[0], P.shape[0]
+    near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
+    sigma, r, rms = np.empty(m), np.empty(m), np.empty(m)
+    dist, t0, t1, t2, t3, t4 = np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
+    start = 0
+    for j in range(m):
+        k = n[j]
+        end = start + k
+        kn, dmin = start, np.inf
+        for i in range(start, end):
+            dx, dy = P[i, 0] - sx, P[i, 1] - sy
+            dist[i] = math.sqrt(dx * dx + dy * dy)
+            if dist[i] < dmin:
+                dmin, kn = dist[i], i
+            t0[i], t1[i] = P[i, 0], P[i, 1]
+        near[j, 0], near[j, 1] = P[kn, 0], P[kn, 1]
+        dm = max(dmin, 1e-9)
+        ray[j, 0], ray[j, 1] = (P[kn, 0] - sx) / dm, (P[kn, 1] - sy) / dm
+        sigma[j] = sigma0 + sigma_frac * _segsum(dist, start, k) / k
+        mx, my = _segsum(t0, start, k) / k, _segsum(t1, start, k) / k
+        for i in range(start, end):
+            u, v = P[i, 0] - mx, P[i, 1] - my
+            t0[i], t1[i], t2[i] = u * u, v * v, u * v
+            w = t0[i] + t1[i]
+            t3[i], t4[i] = u * w, v * w
+        suu, svv, suv = _segsum(t0, start, k), _segsum(t1, start, k), _segsum(t2, start, k)
+        b1, b2 = 0.5 * _segsum(t3, start, k), 0.5 * _segsum(t4, start, k)
+        det = suu * svv - suv * suv
+        good = k >= 3 and det > 1e-10 * ((suu + svv) * (suu + svv))
+        uc = (svv * b1 - suv * b2) / det if good else 0.0
+        vc = (suu * b2 - suv * b1) / det if good else 0.0
+        r[j] = math.sqrt(uc * uc + vc * vc + (suu + svv) / k) if good else np.inf
+        c[j, 0], c[j, 1] = mx + uc, my + vc
+        rg = r[j] if good else 0.0
+        for i in range(start, end):
+            res = math.sqrt(((P[i, 0] - mx) - uc) ** 2 + ((P[i, 1] - my) - vc) ** 2) - rg
+            t0[i] = res * res
+        rms[j] = math.sqrt(_segsum(t0, start, k) / k) if good else np.inf
+        start = end
+    return near, ray, sigma, c, r, rms
+
+
+@kernel
+def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac):
+    """The second block of :func:`measure_clusters`: per point the arguments (y, x) of the angle between the point
+    and the cluster's mean direction seen from its centre c (for numpy's arctan2), per cluster the entries a11, a12,
+    a22, a13, a23, a33 (6, m) of J^T W J for its circle covariance (``point_variances`` weights, outward normals),
+    and the dents of :func:`concavity` (k = 2); numpy's order throughout."""
+    m, N = n.shape[0], P.shape[0]
+    ay, ax = np.empty(N), np.empty(N)
+    A = np.empty((6, m))
+    t = np.empty((6, N))
+    dents = np.zeros(m)
+    g = np.empty(N, np.int64)
+    start = 0
+    for j in range(m):
+        k = n[j]
+        end = start + k
+        for i in range(start, end):
+            g[i] = j
+            t[0, i], t[1, i] = P[i, 0] - c[j, 0], P[i, 1] - c[j, 1]
+        midx, midy = _segsum(t[0], start, k) / k, _segsum(t[1], start, k) / k
+        for i in range(start, end):
+            ux, uy = t[0, i], t[1, i]
+            ay[i] = ux * midy - uy * midx
+            ax[i] = ux * midx + uy * midy
+            dx, dy = P[i, 0] - sx, P[i, 1] - sy
+            dist = math.sqrt(dx * dx + dy * dy)
+            d2 = max(math.sqrt(ux * ux + uy * uy), 1e-12)
+            nx, ny = ux / d2, uy / d2
+            cos = (dx * nx + dy * ny) / max(dist, 1e-12)
+            cos2 = min(cos * cos, 1.0)
+            sr = sigma0 + sigma_frac * dist
+            wt = 1.0 / max(sr * sr * cos2 + (dist * dphi) ** 2 / 12.0 * (1.0 - cos2), 1e-12)
+            t[0, i], t[1, i], t[2, i] = wt * nx * nx, wt * nx * ny, wt * ny * ny
+            t[3, i], t[4, i], t[5, i] = wt * nx, wt * ny, wt
+        for q in range(6):
+            A[q, j] = _segsum(t[q], start, k)
+        start = end
+    for i in range(N - 4):
+        if g[i] != g[i + 4]:
+            continue
+        ex, ey = P[i + 4, 0] - P[i, 0], P[i + 4, 1] - P[i, 1]
+        length = max(math.sqrt(ex * ex + ey * ey), 1e-12)
+        side_b = ex * (P[i + 2, 1] - P[i, 1]) - ey * (P[i + 2, 0] - P[i, 0])
+        side_s = ex * (sy - P[i, 1]) - ey * (sx - P[i, 0])
+        sg = 1.0 if side_s > 0 else (-1.0 if side_s < 0 else (0.0 if side_s == 0 else np.nan))
+        val = -sg * side_b / length
+        cur = dents[g[i]]
+        if not (cur >= val or cur != cur):
+            dents[g[i]] = val
+    return ay, ax, A, dents
 
 
 def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:

@@ -1,5 +1,5 @@
-"""Issue 26: the compiled clustering, compactness test and wall points (geometry.cluster_points, compact_mask,
-wall_candidates_many) give the bits of the numpy code they replaced (copied here as of d27bf46, the reference),
+"""Issue 26: the compiled clustering, compactness test, cluster measurements and wall points
+(geometry.cluster_points, compact_mask, measure_clusters, wall_candidates_many) give the bits of the numpy code they replaced (copied here as of d27bf46, the reference),
 on random scenes of posts, boxes and walls, and on the scans ``bigcbf perf`` times."""
 import numpy as np
 import pytest
@@ -101,6 +101,112 @@ def ref_wall_candidates_many(point_sets, robot_xy, spacing):
     return Q[sel[order]]
 
 
+def ref_measure_clusters(sp, clusters, params):
+    """geometry.measure_clusters as of d27bf46."""
+    m = len(clusters)
+    if m == 0:
+        return [], np.zeros(0)
+    pr = params
+    n = np.array([len(c.idx) for c in clusters])
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    idx = np.concatenate([c.idx for c in clusters])
+    g = np.repeat(np.arange(m), n)
+    P = sp.xy[idx]
+    px, py = P[:, 0], P[:, 1]
+    sensor = sp.sensor
+    dx, dy = px - sensor[0], py - sensor[1]
+    dist = np.sqrt(dx * dx + dy * dy)
+    # nearest point of each cluster (the first one at the minimum, as np.argmin)
+    dmin = np.minimum.reduceat(dist, starts)
+    cand = np.where(dist == dmin[g], np.arange(len(idx)), len(idx))
+    k_near = np.minimum.reduceat(cand, starts)
+    near = P[k_near]
+    ray = (near - sensor) / np.maximum(dmin, 1e-9)[:, None]
+    sigma = pr.range_sigma_m + pr.range_sigma_frac * np.add.reduceat(dist, starts) / n
+    # algebraic (Kasa) circle fits, as fit_circle
+    mean = np.add.reduceat(P, starts) / n[:, None]
+    u, v = px - mean[g, 0], py - mean[g, 1]
+    uu, vv, uv = u * u, v * v, u * v
+    suu, svv, suv = np.add.reduceat(uu, starts), np.add.reduceat(vv, starts), np.add.reduceat(uv, starts)
+    w = uu + vv
+    b1, b2 = 0.5 * np.add.reduceat(u * w, starts), 0.5 * np.add.reduceat(v * w, starts)
+    det = suu * svv - suv * suv
+    good = (n >= 3) & (det > 1e-10 * (suu + svv) ** 2)
+    sdet = np.where(good, det, 1.0)
+    uc = np.where(good, (svv * b1 - suv * b2) / sdet, 0.0)
+    vc = np.where(good, (suu * b2 - suv * b1) / sdet, 0.0)
+    r = np.where(good, np.sqrt(uc * uc + vc * vc + (suu + svv) / n), np.inf)
+    c = mean + np.stack([uc, vc], axis=1)
+    res = np.sqrt((u - uc[g]) ** 2 + (v - vc[g]) ** 2) - np.where(good, r, 0.0)[g]
+    rms = np.where(good, np.sqrt(np.add.reduceat(res * res, starts) / n), np.inf)
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
+    tol = np.where(fitted, sigma, 0.0)
+    for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
+        rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
+        pts = P[starts[j]: starts[j] + n[j]]
+        cj, rmsj = G.fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
+        c[j], r[j], rms[j] = cj, rj, rmsj
+    behind = np.einsum("ij,ij->i", ray, c - near) > 0
+    # arc span seen from the centre, as measure_compact
+    u2x, u2y = px - c[g, 0], py - c[g, 1]
+    midx, midy = np.add.reduceat(u2x, starts) / n, np.add.reduceat(u2y, starts) / n
+    ang = np.arctan2(u2x * midy[g] - u2y * midx[g], u2x * midx[g] + u2y * midy[g])
+    span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
+    dc = np.linalg.norm(c - sensor, axis=1)
+    rr = np.where(np.isfinite(r), r, 1.0)
+    sampled = np.minimum(np.arccos(np.minimum(rr / np.maximum(dc, 1e-12), 1.0)),
+                         np.arcsin(np.clip((rr - dc * sp.angle_increment) / rr, 0.0, 1.0)))
+    occluded = np.array([cl.occluded for cl in clusters])
+    need = np.where(occluded, pr.fit_min_arc_rad,
+                    np.maximum(pr.fit_min_arc_rad, pr.fit_span_ratio * 2 * sampled))
+    # point weights for the circle covariances (point_variances with the outward normals)
+    d2 = np.maximum(np.sqrt(u2x * u2x + u2y * u2y), 1e-12)
+    nx, ny = u2x / d2, u2y / d2
+    cos = (dx * nx + dy * ny) / np.maximum(dist, 1e-12)
+    cos2 = np.minimum(cos * cos, 1.0)
+    sr = pr.range_sigma_m + pr.range_sigma_frac * dist
+    wt = 1.0 / np.maximum(sr * sr * cos2 + (dist * sp.angle_increment) ** 2 / 12.0 * (1.0 - cos2), 1e-12)
+    a11, a12, a22 = (np.add.reduceat(wt * nx * nx, starts), np.add.reduceat(wt * nx * ny, starts),
+                     np.add.reduceat(wt * ny * ny, starts))
+    a13, a23, a33 = np.add.reduceat(wt * nx, starts), np.add.reduceat(wt * ny, starts), np.add.reduceat(wt, starts)
+    # dents (concavity, k = 2): the point two ahead against the chord from two before to two after
+    dents = np.zeros(m)
+    N = len(idx)
+    if N > 4:
+        ia = np.arange(N - 4)
+        same = g[ia] == g[ia + 4]
+        if same.any():
+            ia = ia[same]
+            a_, b_, c_ = P[ia], P[ia + 2], P[ia + 4]
+            ex, ey = c_[:, 0] - a_[:, 0], c_[:, 1] - a_[:, 1]
+            length = np.maximum(np.sqrt(ex * ex + ey * ey), 1e-12)
+            side_b = ex * (b_[:, 1] - a_[:, 1]) - ey * (b_[:, 0] - a_[:, 0])
+            side_s = ex * (sensor[1] - a_[:, 1]) - ey * (sensor[0] - a_[:, 0])
+            np.maximum.at(dents, g[ia], -np.sign(side_s) * side_b / length)
+    out = []
+    for j in range(m):
+        pts = P[starts[j]: starts[j] + n[j]]
+        if tol[j] > 0 and rms[j] <= tol[j]:
+            rect, rms_rect = None, np.inf
+        else:
+            rect = G.fit_rectangle(pts, sensor, full=True)
+            rms_rect = rect[2]
+        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
+            cov = G._circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
+                                        c[j], sensor, pr)
+            out.append(G.Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
+                                   bool(rms[j] <= rms_rect)))
+            continue
+        if rect is None:
+            rect = G.fit_rectangle(pts, sensor, full=True)
+        rc, rrad, rms_rect, axes, lengths = rect
+        cov = G.rectangle_covariance(pts, axes, lengths, sensor, sp.angle_increment, pr)
+        out.append(G.Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
+                               float(rms_rect), float(sigma[j])))
+    return out, dents
+
+
 def _scans():
     """Random scenes (posts, boxes, walls, some scans with dropouts), then the perf bench's scans."""
     rng = np.random.default_rng(11)
@@ -136,7 +242,15 @@ def test_compiled_geometry_is_the_numpy_code_bit_for_bit(params):
         assert len(got) == len(want)
         for a, b in zip(got, want):
             assert np.array_equal(a.idx, b.idx) and a.idx.dtype == b.idx.dtype and a.occluded == b.occluded
-        assert np.array_equal(G.compact_mask(sp, want, params), ref_compact_mask(sp, want, params))
+        mask = ref_compact_mask(sp, want, params)
+        assert np.array_equal(G.compact_mask(sp, want, params), mask)
+        compact = [c for c, k in zip(want, mask) if k and len(c.idx) >= 3]
+        (ms, dents), (ms0, dents0) = G.measure_clusters(sp, compact, params), ref_measure_clusters(sp, compact, params)
+        assert np.array_equal(dents, dents0) and len(ms) == len(ms0)
+        for a, b in zip(ms, ms0):
+            assert np.array_equal(a.center, b.center) and np.array_equal(a.cov, b.cov)
+            assert (a.radius, a.arc_fit, a.rms, a.rms_expected, a.round) == (b.radius, b.arc_fit, b.rms,
+                                                                              b.rms_expected, b.round)
         sets = [sp.xy[c.idx] for c in want] + [np.zeros((0, 2))]
         robot = np.array(pose[:2])
         for spacing in (0.2, 0.05):
