@@ -143,16 +143,20 @@ def _param(raw, file: str, where: str) -> Param:
     name = _need(raw, "name", str, file, where)
     if not (name.startswith("stack.") or name.startswith("method.")):
         raise UserError(f"a parameter is stack.KEY or method.KEY, got {name!r}", file=file, field=f"{where}.name")
-    lo, hi = (float(v) for v in _need(raw, "range", list, file, where)[:2]) if len(raw.get("range", [])) == 2 \
-        else (None, None)
-    if lo is None or not lo < hi:
-        raise UserError("expected [low, high] with low < high", file=file, field=f"{where}.range")
+    rng = _need(raw, "range", list, file, where)
+    if len(rng) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                            for v in rng) or not rng[0] < rng[1]:
+        raise UserError("expected [low, high], two finite numbers with low < high", file=file,
+                        field=f"{where}.range")
+    lo, hi = float(rng[0]), float(rng[1])
+    if not isinstance(raw.get("integer", False), bool):
+        raise UserError("expected true or false", file=file, field=f"{where}.integer")
     scale = raw.get("scale", "linear")
     if scale not in SCALES or (scale == "log" and lo <= 0):
         raise UserError(f"scale is one of {', '.join(SCALES)} (log needs a range above 0), got {scale!r}", file=file,
                         field=f"{where}.scale")
     default = _need(raw, "default", (int, float), file, where)
-    return Param(name, str(raw.get("unit", "-")), default, lo, hi, scale, bool(raw.get("integer", False)),
+    return Param(name, str(raw.get("unit", "-")), default, lo, hi, scale, raw.get("integer", False),
                  _need(raw, "source", str, file, where))
 
 
@@ -161,6 +165,12 @@ def _method_grid(name: str, raw, n: int, file: str) -> MethodGrid:
     where = f"methods.{name}"
     if name not in METHODS:
         raise UserError(f"not a registered method (known: {', '.join(METHODS.names())})", file=file, field=where)
+    if not isinstance(raw, dict):
+        raise UserError(f"expected a table, got {raw!r}"[:120], file=file, field=where)
+    shared = raw.get("shared_by", [])
+    if not isinstance(shared, list) or not all(isinstance(m, str) and m in METHODS and m != name for m in shared):
+        raise UserError(f"expected a list of other registered methods, got {shared!r}"[:120], file=file,
+                        field=f"{where}.shared_by")
     params = tuple(_param(p, file, f"{where}.params[{j}]") for j, p in enumerate(_need(raw, "params", list, file,
                                                                                           where)))
     rows = _need(raw, "configs", list, file, where)
@@ -183,8 +193,7 @@ def _method_grid(name: str, raw, n: int, file: str) -> MethodGrid:
                         field=f"{where}.configs[0]")
     if len(set(configs)) != len(configs):
         raise UserError("two configurations are the same", file=file, field=f"{where}.configs")
-    shared = tuple(raw.get("shared_by", ()))
-    return MethodGrid(name, params, tuple(configs), shared)
+    return MethodGrid(name, params, tuple(configs), tuple(shared))
 
 
 def load_grid(path: str | Path = GRID) -> Grid:
@@ -210,10 +219,11 @@ def load_grid(path: str | Path = GRID) -> Grid:
     fams = tuple(_need(sub, "families", list, file, "subset"))
     seeds = tuple(_need(sub, "world_seeds", list, file, "subset"))
     for fam in fams:
-        known = worlds.FAMILIES.get(fam).splits["dev"] if fam in worlds.FAMILIES else None
+        known = worlds.FAMILIES.get(fam).splits.get("dev") if isinstance(fam, str) and fam in worlds.FAMILIES \
+            else None
         if known is None:
-            raise UserError(f"unknown world family {fam!r}", file=file, field="subset.families")
-        bad = [s for s in seeds if not isinstance(s, int) or s not in known]
+            raise UserError(f"not a world family with a dev split: {fam!r}"[:120], file=file, field="subset.families")
+        bad = [s for s in seeds if isinstance(s, bool) or not isinstance(s, int) or s not in known][:5]
         if bad:
             raise UserError(f"world seeds {bad} are not in {fam}'s dev split ({known.start}-{known.stop - 1})",
                             file=file, field="subset.world_seeds")
