@@ -410,7 +410,8 @@ CLI = {
     "bench": ([], {"--out": "out", "--methods": "word", "--suite": "word", "--scenarios": "file", "--split": "word",
                    "--seeds": "num", "--seed-list": "num", "--workers": "num", "--engine": "word",
                    "--ray-address": "word", "--config": "file", "--profile": "file", "--perception": "word",
-                   "--report-only": None, "--docs": "file", "--progress": "word", "--route": "word"}),
+                   "--report-only": None, "--docs": "file", "--progress": "word", "--route": "word",
+                   "--variant": "word"}),
     "sim": (["scenario"], {"--ros2": None, "--domain-id": "num", "--loopback": None, "--lockstep": None,
                            "--seed": "num", "--config": "file", "--robot-profile": "file", "--time-limit": "num",
                            "--speed": "num", "--cmd-timeout": "num", "--wait": "num", "--json": None}),
@@ -419,6 +420,9 @@ CLI = {
                     "--odom-topic": "word", "--cmd-topic": "word", "--cmd-in-topic": "word", "--goal-topic": "word",
                     "--stamped": None, "--markers": None, "--scan-timeout": "num", "--odom-timeout": "num",
                     "--overrun-ms": "num", "--idle-exit": "num", "--json": None}),
+    "tune": ([], {"--out": "out", "--methods": "word", "--workers": "num", "--grid": "file", "--configs": "num",
+                  "--families": "word", "--world-seeds": "num", "--time-limit": "num", "--write-shipped": None,
+                  "--progress": "word"}),
 }
 #: `bigcbf scenarios generate`'s options
 GENERATE = {"--seed": "num", "--out": "out", "--force": None, "--list": None}
@@ -453,6 +457,8 @@ def command_lines(draw, pools):
         options = GENERATE
     if cmd == "bench" and draw(st.booleans()):                # keep most benches small: one scenario, one method
         argv += ["--scenarios", str(pools["file"][0]), "--methods", "cbf-only", "--seeds", "1"]
+    if cmd == "tune" and draw(st.booleans()):                 # keep most searches small: one method, world, config
+        argv += ["--methods", "cbf-only", "--configs", "0", "--families", "posts", "--world-seeds", "0"]
     if cmd == "record" and draw(st.booleans()):               # its two required options, valid
         argv += ["--robot-profile", pools["good_robot"][0], "--out", pools["out"][1]]
     for opt in draw(st.lists(st.sampled_from(sorted(options) or ["--help"]), max_size=4)):
