@@ -84,21 +84,23 @@ def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
         return [Cluster(np.array([0]), False)]
     lam = params.cluster_lambda_rad
     dphi = sp.angle_increment
-    order, bounds, occ = _cluster_kernel(np.ascontiguousarray(sp.xy), np.ascontiguousarray(sp.ranges, dtype=float),
-                                         np.ascontiguousarray(sp.beam, dtype=np.int64), int(sp.n_beams), dphi, lam,
-                                         float(np.sin(dphi)), float(np.sin(max(lam - dphi, 1e-9))),
-                                         float(params.cluster_dist_m), float(params.range_sigma_m),
-                                         float(params.range_sigma_frac))           # (numpy's sines, as before)
-    if len(bounds) == 0:
+    order, bounds, occ = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.bool_)   # (filled in place:
+    nb = _cluster_kernel(np.ascontiguousarray(sp.xy), np.ascontiguousarray(sp.ranges, dtype=float),  # no boxing)
+                         np.ascontiguousarray(sp.beam, dtype=np.int64), int(sp.n_beams), dphi, lam,
+                         float(np.sin(dphi)), float(np.sin(max(lam - dphi, 1e-9))), float(params.cluster_dist_m),
+                         float(params.range_sigma_m), float(params.range_sigma_frac), order, bounds, occ)
+    if nb < 0:                                                                     # (numpy's sines, as before)
         return [Cluster(np.arange(n), False)]
-    return [Cluster(seg, bool(o)) for seg, o in zip(np.split(order, bounds), occ)]
+    return [Cluster(seg, bool(o)) for seg, o in zip(np.split(order, bounds[:nb]), occ[:nb + 1])]
 
 
 @kernel
-def _cluster_kernel(p, ranges, beam, n_beams, dphi, lam, sin_dphi, sin_rest, cluster_dist, sigma_r, sigma_frac):
-    """:func:`cluster_points`'s joins and segments: returns the scan order rotated to start after a break (n,),
-    the segment bounds into it (none: one cluster of every point, in scan order) and each segment's occlusion
-    flag. The numpy formulation's arithmetic, point by point."""
+def _cluster_kernel(p, ranges, beam, n_beams, dphi, lam, sin_dphi, sin_rest, cluster_dist, sigma_r, sigma_frac,
+                    order, bounds, occ):
+    """:func:`cluster_points`'s joins and segments into ``order`` (the scan order rotated to start after a break),
+    ``bounds`` (the segment bounds into it) and ``occ`` (each segment's occlusion flag), all (n,); returns the
+    number of bounds, -1 without a break (one cluster of every point, in scan order). The numpy formulation's
+    arithmetic, point by point."""
     n = p.shape[0]
     join = np.empty(n, np.bool_)
     first_break = -1
@@ -117,23 +119,17 @@ def _cluster_kernel(p, ranges, beam, n_beams, dphi, lam, sin_dphi, sin_rest, clu
         if not join[i] and first_break < 0:
             first_break = i
     if first_break < 0:
-        return np.arange(n), np.zeros(0, np.int64), np.zeros(0, np.bool_)
+        return -1
     start = (first_break + 1) % n
-    order = np.empty(n, np.int64)
     for k in range(n):
         order[k] = (k + start) % n
     nb = 0
     for k in range(n - 1):
         if not join[order[k]]:
-            nb += 1
-    bounds = np.empty(nb, np.int64)
-    nb = 0
-    for k in range(n - 1):
-        if not join[order[k]]:
             bounds[nb] = k + 1
             nb += 1
-    occ = np.zeros(nb + 1, np.bool_)
     for s in range(nb + 1):
+        occ[s] = False
         lo = 0 if s == 0 else bounds[s - 1]
         hi = n - 1 if s == nb else bounds[s] - 1
         first, last = order[lo], order[hi]
@@ -142,7 +138,7 @@ def _cluster_kernel(p, ranges, beam, n_beams, dphi, lam, sin_dphi, sin_rest, clu
             occ[s] = True
         if (beam[nextp] - beam[last]) % n_beams == 1 and ranges[nextp] < ranges[last]:
             occ[s] = True
-    return order, bounds, occ
+    return nb
 
 
 def _norms(v: np.ndarray) -> np.ndarray:
@@ -429,8 +425,10 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])], dtype=float)
     sensor = sp.sensor
     # nearest points, range noise, algebraic (Kasa) circle fits and their residuals, as fit_circle (compiled)
-    near, ray, sigma, c, r, rms = _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m),
-                                             float(pr.range_sigma_frac))
+    near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
+    sigma, r, rms = np.empty(m), np.empty(m), np.empty(m)
+    _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m), float(pr.range_sigma_frac), near,
+               ray, sigma, c, r, rms)
     behind = np.einsum("ij,ij->i", ray, c - near) > 0
     fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
     tol = np.where(fitted, sigma, 0.0)
@@ -441,8 +439,9 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         c[j], r[j], rms[j] = cj, rj, rmsj
     behind = np.einsum("ij,ij->i", ray, c - near) > 0
     # arc span seen from the centre, as measure_compact (numpy's arctan2 of compiled arguments)
-    ay, ax, A, dents = _arc_terms(P, n, c, float(sensor[0]), float(sensor[1]), float(sp.angle_increment),
-                                  float(pr.range_sigma_m), float(pr.range_sigma_frac))
+    ay, ax, A, dents = np.empty(len(P)), np.empty(len(P)), np.empty((6, m)), np.zeros(m)
+    _arc_terms(P, n, c, float(sensor[0]), float(sensor[1]), float(sp.angle_increment), float(pr.range_sigma_m),
+               float(pr.range_sigma_frac), ay, ax, A, dents)
     ang = np.arctan2(ay, ax)
     span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
     dc = np.linalg.norm(c - sensor, axis=1)
@@ -516,14 +515,12 @@ def _segsum(a, lo, n):
 
 
 @kernel
-def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac):
+def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac, near, ray, sigma, c, r, rms):
     """The first block of :func:`measure_clusters` over clusters of n[c] points of P: each one's nearest point and
     the unit ray to it, the range-noise std at its mean range, and its algebraic circle fit (centre, radius, RMS
     residual; inf radius and rms for (near-)collinear points), in the numpy formulation's order (sums as
-    ``np.add.reduceat``)."""
+    ``np.add.reduceat``), into the output arrays (m, 2) near, ray, c and (m,) sigma, r, rms."""
     m, N = n.shape[0], P.shape[0]
-    near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
-    sigma, r, rms = np.empty(m), np.empty(m), np.empty(m)
     dist, t0, t1, t2, t3, t4 = np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
     start = 0
     for j in range(m):
@@ -560,20 +557,16 @@ def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac):
             t0[i] = res * res
         rms[j] = math.sqrt(_segsum(t0, start, k) / k) if good else np.inf
         start = end
-    return near, ray, sigma, c, r, rms
 
 
 @kernel
-def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac):
+def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents):
     """The second block of :func:`measure_clusters`: per point the arguments (y, x) of the angle between the point
     and the cluster's mean direction seen from its centre c (for numpy's arctan2), per cluster the entries a11, a12,
     a22, a13, a23, a33 (6, m) of J^T W J for its circle covariance (``point_variances`` weights, outward normals),
-    and the dents of :func:`concavity` (k = 2); numpy's order throughout."""
+    and the dents of :func:`concavity` (k = 2; ``dents`` starts at 0); numpy's order throughout."""
     m, N = n.shape[0], P.shape[0]
-    ay, ax = np.empty(N), np.empty(N)
-    A = np.empty((6, m))
     t = np.empty((6, N))
-    dents = np.zeros(m)
     g = np.empty(N, np.int64)
     start = 0
     for j in range(m):
@@ -612,7 +605,6 @@ def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac):
         cur = dents[g[i]]
         if not (cur >= val or cur != cur):
             dents[g[i]] = val
-    return ay, ax, A, dents
 
 
 def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
@@ -689,12 +681,14 @@ def wall_candidates_many(point_sets: list, robot_xy: np.ndarray, spacing: float)
         return np.zeros((0, 2))
     n = np.array([len(q) for q in sets], np.int64)
     Q = np.ascontiguousarray(np.concatenate(sets), dtype=float)
-    return Q[_wall_candidates_kernel(Q, n, float(robot_xy[0]), float(robot_xy[1]), float(spacing))]
+    sel = np.empty(len(Q), np.int64)
+    k = _wall_candidates_kernel(Q, n, float(robot_xy[0]), float(robot_xy[1]), float(spacing), sel)
+    return Q[sel[:k]]
 
 
 @kernel
-def _wall_candidates_kernel(Q, n, rx, ry, spacing):
-    """The indices into Q of :func:`wall_candidates_many`'s points, cluster by cluster (n[c] points each), each
+def _wall_candidates_kernel(Q, n, rx, ry, spacing, out):
+    """The indices into Q (into ``out``; returns how many) of :func:`wall_candidates_many`'s points, cluster by cluster (n[c] points each), each
     one's nearest point first; the path length is one cumulative sum over all of Q, as in numpy."""
     N = Q.shape[0]
     cs = np.empty(N)             # the cumulative sum of the steps, 0 at each cluster's first point
@@ -708,7 +702,6 @@ def _wall_candidates_kernel(Q, n, rx, ry, spacing):
             ex, ey = Q[i, 0] - Q[i - 1, 0], Q[i, 1] - Q[i - 1, 1]
             acc += math.sqrt(ex ** 2 + ey ** 2)
         cs[i] = acc
-    out = np.empty(N, np.int64)
     k = 0
     start = 0
     for c in range(n.shape[0]):
@@ -741,7 +734,7 @@ def _wall_candidates_kernel(Q, n, rx, ry, spacing):
                 k += 1
             prev_bin = b_i
         start = end + 1
-    return out[:k]
+    return k
 
 
 def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np.ndarray:
@@ -755,14 +748,16 @@ def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np
     limit = params.compact_max_extent_m
     n = np.array([len(c.idx) for c in clusters], np.int64)
     P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])])
-    return _compact_kernel(P, n, float(limit), int(params.min_points))
+    ok = np.empty(m, np.bool_)
+    _compact_kernel(P, n, float(limit), int(params.min_points), ok)
+    return ok
 
 
 @kernel
-def _compact_kernel(P, n, limit, min_points):
-    """:func:`compact_mask` over the concatenated points P of clusters of n[c] points (:func:`extent` inlined)."""
+def _compact_kernel(P, n, limit, min_points, ok):
+    """:func:`compact_mask` into ``ok`` over the concatenated points P of clusters of n[c] points (:func:`extent`
+    inlined)."""
     m = n.shape[0]
-    ok = np.zeros(m, np.bool_)
     start = 0
     for c in range(m):
         k = n[c]
@@ -782,7 +777,6 @@ def _compact_kernel(P, n, limit, min_points):
                     best = v if v > best or v != v else best
             ok[c] = math.sqrt(best) <= limit
         start += k
-    return ok
 
 
 def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: PerceptionParams) -> np.ndarray:
