@@ -47,8 +47,8 @@ def load_config(config: str | Path | RunConfig | None = None, profile: str | Pat
     (or taken as given when ``config`` is a RunConfig), then with a ``--profile`` stack-parameter TOML (a
     calibrated uncertainty profile from ``bigcbf calibrate``) over its ``stack``.
 
-    ``notes(text)`` receives remarks about the profile (an axis the calibration did not identify); default:
-    none are reported."""
+    ``notes(text)`` receives remarks about the profile (an axis the calibration did not identify) and, when a tuned
+    configuration is shipped and ``base`` is not given, its provenance line; default: none are reported."""
     from .params.stack import load_stack_params
 
     if not isinstance(config, RunConfig):
@@ -63,6 +63,12 @@ def load_config(config: str | Path | RunConfig | None = None, profile: str | Pat
         cfg = load_run_config(config, base=base)
     else:
         cfg = base or RunConfig()
+    if base is None and not isinstance(config, RunConfig) and notes is not None:
+        from .config import TUNED_PATH, tuned_provenance
+        prov = tuned_provenance()
+        if prov is not None:           # the shipped tuned configuration is every method's default (docs/tuning.md)
+            notes(f"method defaults: the tuned configuration {TUNED_PATH.name} ({prov}); --config "
+                  f"{TUNED_PATH.parent / 'defaults.toml'} runs the authors' defaults")
     if profile is not None:
         stack = load_stack_params(profile, base=cfg.stack)
         missing = [a for a, ok in zip(("vx", "vy"), stack.uncertainty.execution.identified[:2]) if not ok]

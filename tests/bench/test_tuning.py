@@ -143,6 +143,10 @@ def _shipped_file_is_the_default(tuned_file, alpha):
         assert RunConfig().stack_for("big-cbf") == default_stack_params()
         assert config.untuned().stack_for("cbf-only").alpha_per_s == default_stack_params().alpha_per_s
         assert "grid.toml sha256" in config.tuned_provenance()
+        from bigcbf.api import load_config
+        notes = []
+        assert load_config(notes=notes.append).stack_for("cbf-only").alpha_per_s == alpha
+        assert len(notes) == 1 and "grid.toml sha256" in notes[0] and "defaults.toml" in notes[0]
         bad = tuned_file.parent / "bad_tuned.toml"
         bad.write_text("[stack]\nalpha_per_s = 2.0\n")
         config.TUNED_PATH = bad
