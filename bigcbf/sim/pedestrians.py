@@ -69,6 +69,7 @@ class Pedestrians:
         self.reactive = np.asarray(reactive, bool)
         self.params = params
         self.robot_radius = robot_radius
+        self._A: tuple[np.ndarray, np.ndarray] | None = None      # (:meth:`_strengths`)
         self.p = np.array([p[0] for p in self.paths]).reshape(-1, 2)
         self.v = np.zeros((self.k, 2))
         self.target = np.ones(self.k, int)
@@ -147,9 +148,20 @@ class Pedestrians:
         pr = self.params
         q = np.ascontiguousarray(q, dtype=float)
         rq = np.ascontiguousarray(rq, dtype=float)
-        A = np.ascontiguousarray(np.broadcast_to(A, (self.k, len(q))), dtype=float)
+        if A.shape != (self.k, len(q)) or not A.flags.c_contiguous or A.dtype != float:
+            A = np.ascontiguousarray(np.broadcast_to(A, (self.k, len(q))), dtype=float)
         e = np.exp(_repulsion_exponents(self.p, self.r, q, rq, float(pr.B_m)))
         return _repulsion_sum(self.p, self.v, q, A, e, float(pr.anisotropy))
+
+    def _strengths(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interaction strengths (k, k) between pedestrians (A, 0 on the diagonal) and (k, 1) from the robot
+        (A_robot for the reactive ones), built once (they are constants of the model)."""
+        if self._A is None:
+            pr = self.params
+            A = np.full((self.k, self.k), pr.A_mps2)
+            np.fill_diagonal(A, 0.0)
+            self._A = (A, np.ascontiguousarray(np.where(self.reactive, pr.A_robot_mps2, 0.0)[:, None]))
+        return self._A
 
     def repulsion_reference(self, q: np.ndarray, rq: np.ndarray, A: np.ndarray) -> np.ndarray:
         """:meth:`_repulsion` in numpy (the reference its compiled form is checked against, bit for bit)."""
@@ -171,13 +183,11 @@ class Pedestrians:
         pr = self.params
         active = (t >= self.t0) & ~self.done
         a = (self._desired(t) - self.v) / pr.tau_s
+        A_peds, A_robot = self._strengths()
         if self.k > 1:
-            A = np.full((self.k, self.k), pr.A_mps2)
-            np.fill_diagonal(A, 0.0)
-            a += self._repulsion(self.p, self.r, A)
+            a += self._repulsion(self.p, self.r, A_peds)
         if robot_xy is not None:
-            A = np.where(self.reactive, pr.A_robot_mps2, 0.0)[:, None]
-            a += self._repulsion(np.asarray(robot_xy, float).reshape(1, 2), np.array([self.robot_radius]), A)
+            a += self._repulsion(np.asarray(robot_xy, float).reshape(1, 2), np.array([self.robot_radius]), A_robot)
         v = self.v + dt * a
         vmax = pr.max_speed_factor * self.v0
         s = np.linalg.norm(v, axis=1)
