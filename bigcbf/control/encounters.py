@@ -33,9 +33,10 @@ current one until it ends.
 encounter is committed, the opposite side's modes are not candidates (GOAL and YIELD remain). The commitment is
 released when every candidate on the committed side fails the safety test of ``eq:behavior_acceptance`` (22) at
 ``commit_release_selections`` consecutive selections (K = 3, 1.5 s at T_B = 0.5 s), and at the end of the
-encounter. Unlike COMPASS (kjungmo/compass), which lets a challenger class win on accumulated evidence, a side
-is never given up for a better cost, only when it is infeasible: BIG-CBF's score already carries the switching cost
-and the dwell, and a discretionary flip is what the flips measured in issue 25 were.
+encounter, and, as COMPASS (kjungmo/compass) lets a challenger class win, when the evidence for the other side
+(:func:`accumulate_evidence`, a leaky sum of its cost advantage) reaches ``commit_evidence_js``: a side that is
+safe but leads nowhere (a wall beside a doorway) is given up when the other side stays clearly better for a while,
+not for a one-selection advantage (the flips measured in issue 25 were one about every second).
 """
 from __future__ import annotations
 
@@ -48,6 +49,8 @@ from ..types import Obstacles
 from .behaviors import goal_basis, obstacle_groups, relevant_obstacle
 from .liveness import mode_side
 
+EVIDENCE_LEAK = 0.7   # lambda: the share of the evidence kept from one selection to the next [-]
+EVIDENCE_MAX = 10.0   # e_max: the evidence is clipped to [0, e_max] [J s]
 GATE_M = 0.5     # a new obstacle within this of a member's predicted position belongs to its encounter [m]
 LOST_S = 1.0     # an encounter none of whose members was seen for this long ends [s]
 
@@ -66,10 +69,21 @@ class Encounter:
     r: np.ndarray                        # (K,) their radii [m]
     side: int = 0
     blocked: int = 0
+    evidence: float = 0.0
 
     def predicted(self, t: float) -> np.ndarray:
         """The members' positions predicted to time t (constant velocity, ``eq:obs_prop`` (2))."""
         return self.p + self.v * max(t - self.t_seen, 0.0)
+
+
+def accumulate_evidence(evidence: float, advantage: float, params: StackParams) -> float:
+    """COMPASS's leaky evidence (kjungmo/compass, Sec. "Accumulating Evidence"), per selection:
+    e <- clip(lambda e + (D - D_floor) T_B, 0, e_max), D = J_keep - J_other the other side's advantage in
+    ``eq:behavior_cost`` (14) (the best viable mode the commitment allows against the best of the other side),
+    D_floor = w_sw (a side flip undoes a maneuver: it is charged as a second switch), lambda = ``EVIDENCE_LEAK``.
+    A constant advantage D > w_sw reaches a threshold E only if (D - w_sw) T_B / (1 - lambda) > E."""
+    e = EVIDENCE_LEAK * evidence + (advantage - params.w_sw) * params.T_B_s
+    return float(min(max(e, 0.0), EVIDENCE_MAX))
 
 
 class EncounterTracker:

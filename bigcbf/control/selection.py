@@ -9,6 +9,7 @@ import numpy as np
 
 from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from .behaviors import MODE_INDEX, REVERSE, SIGMA
+from .encounters import EVIDENCE_LEAK, accumulate_evidence
 from .imagination import Imagination
 
 
@@ -59,7 +60,9 @@ class BehaviorSelector:
     ``bigcbf.control.encounters``): ``select`` is given the current encounter. While it is committed to a side, the
     opposite side's modes are not viable (rules 1-4 choose among the rest: that side, GOAL, YIELD, else the
     fallback), unless every candidate on the committed side has failed eq:behavior_acceptance (22) at
-    ``commit_release_selections`` consecutive selections, which releases the commitment. The first sided mode
+    ``commit_release_selections`` consecutive selections, or the evidence for the other side (the leaky sum of its
+    cost advantage beyond w_sw, :func:`~bigcbf.control.encounters.accumulate_evidence`) has reached
+    ``commit_evidence_js``; either releases the commitment. The first sided mode
     selected during an encounter commits it. While an encounter is current, the side commitment above takes its
     side from the encounter (none for an uncommitted one), not from the last sided mode.
     """
@@ -98,8 +101,15 @@ class BehaviorSelector:
                 enc.blocked = 0
             else:
                 enc.blocked += 1
-            if enc.blocked >= self.rules.commit_release_selections:
-                enc.side, enc.blocked = 0, 0
+            J = np.where(acc, img.J, np.inf)
+            j_keep, j_other = J[side != -enc.side].min(initial=np.inf), J[side == -enc.side].min(initial=np.inf)
+            if np.isfinite(j_keep) and np.isfinite(j_other):      # the evidence for the other side (encounters.py)
+                enc.evidence = accumulate_evidence(enc.evidence, j_keep - j_other, self.params)
+            else:
+                enc.evidence *= EVIDENCE_LEAK
+            if (enc.blocked >= self.rules.commit_release_selections
+                    or enc.evidence >= self.rules.commit_evidence_js):
+                enc.side, enc.blocked, enc.evidence = 0, 0, 0.0
         self.side = float(enc.side)
         return acc & (side != -enc.side) if enc.side != 0 else acc
 

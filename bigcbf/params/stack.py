@@ -312,8 +312,9 @@ class PlusRules:
     - ``encounter_commitment`` (issue 25): the passing side is kept per encounter (``bigcbf.control.encounters``:
       an obstacle's group being passed, joined across changing track ids) until the encounter is behind the robot
       or every candidate on its side fails ``eq:behavior_acceptance`` (22) at ``commit_release_selections``
-      consecutive selections; the opposite side's modes are no candidates meanwhile (off: ``side_commitment``
-      alone).
+      consecutive selections, or the leaky evidence for the other side (its cost advantage beyond w_sw, summed
+      over time) reaches ``commit_evidence_js``; the opposite side's modes are no candidates meanwhile (off:
+      ``side_commitment`` alone).
     - ``executed_speed`` (issue 25): a candidate that ``eq:behavior_acceptance`` (22) rejects at its speed limit is
       imagined again at the slower speeds the filter would let it have near obstacles, over the same look-ahead
       distance (the horizon lengthened as the speed falls), and runs at the fastest speed that passes
@@ -332,6 +333,7 @@ class PlusRules:
     speed_governor: bool = False  # the liveness option (bigcbf.control.governor) [on/off]
     encounter_commitment: bool = True  # keep the passing side per encounter (control/encounters.py) [on/off]
     commit_release_selections: int = ranged(3, 1, 100)  # K: selections with the side infeasible before release [-]
+    commit_evidence_js: float = ranged(1.5, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
 
     def __post_init__(self):
