@@ -32,8 +32,8 @@ import numpy as np
 
 from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
-from .behaviors import (BEHAVIORS, REVERSE, PolicyData, _policy_rows, goal_basis, mode_indices, mode_rows,
-                        release_velocity)
+from .behaviors import (BEHAVIORS, PASS_KIND, REVERSE, PolicyData, _policy_rows, goal_basis, mode_indices,
+                        mode_rows, obstacle_groups, release_velocity)
 from .faults import perception_fault
 from .governor import GOVERNED_MODES, govern_c, obstacle_sigma_term
 from .jit import kernel
@@ -158,6 +158,23 @@ class _Governed:
         return w_gov
 
 
+_GROUPS: list = [None, None]     # the last (key, groups) of _groups
+
+
+def _groups(K: _Constants, obstacles: Obstacles, params: StackParams, rules: PlusRules) -> np.ndarray | None:
+    """The obstacle groups ``PolicyData.build`` would compute for this rollout (``behaviors.obstacle_groups``, when
+    a PASS row reads them), kept for the next rollout on the same obstacles (a selection imagines the same scene
+    several times: the behaviors, the release fan, the executed-speed judgement); None where build computes none."""
+    if not ((rules.pass_group_reach or rules.pass_forward_beside) and len(obstacles) and np.any(K.rows[0] == PASS_KIND)):
+        return None
+    p = np.ascontiguousarray(obstacles.p, dtype=float)
+    r = np.ascontiguousarray(obstacles.r, dtype=float).reshape(-1)
+    key = (p.tobytes(), r.tobytes(), float(params.uncertainty.r_robot_m), float(params.uncertainty.d0_m))
+    if _GROUPS[0] != key:
+        _GROUPS[:] = [key, obstacle_groups(p, r, params)]
+    return _GROUPS[1]
+
+
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
              release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
              rules: PlusRules = PAPER_RULES) -> _Rollout:
@@ -180,7 +197,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)
     policy = PolicyData.build(K.midx, goal, obstacles.p, obstacles.r, params, obs_v=obstacles.v, release=release_v,
-                              rows=K.rows, rules=rules)      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
+                              rows=K.rows, rules=rules, groups=_groups(K, obstacles, params, rules))      # the groups of eq:behavior_subgoals (10) from the obstacles at k = 0
     p, th = ((np.full(B, complex(state.px, state.py)), np.full(B, float(state.theta))) if start is None
              else (np.array(start[0], complex), np.array(start[1], float)))   # one start state per row
     # (N+1, B) layouts: one contiguous row per step; row N of V and U repeats row N-1

@@ -98,3 +98,20 @@ def test_compiled_barrier_terms_are_numpy_bit_for_bit(params, shared, seed):
     want = _barrier_terms_numpy(ro, speed, obs, params, shared)
     for g, w in zip(got, want):
         assert g.shape == w.shape and np.array_equal(g, w)
+
+
+def test_cached_obstacle_groups_are_those_of_the_scene():
+    """imagination._groups keeps the last scene's groups: alternating scenes (and radii) must each get their own."""
+    rules = PlusRules()
+    scenes = [scene(s) for s in range(4)]
+    scenes.append((scenes[0][0], scenes[0][1].__class__(scenes[0][1].p, scenes[0][1].v, scenes[0][1].cov,
+                                                        scenes[0][1].r * 3.0, scenes[0][1].static,
+                                                        scenes[0][1].ids), scenes[0][2]))
+    fresh = []
+    for state, obs, goal in scenes:
+        im._GROUPS[:] = [None, None]
+        fresh.append(im.imagine(state, obs, goal, SIMULATION, rules=rules))
+    for k in [0, 1, 0, 2, 3, 4, 0, 4]:
+        state, obs, goal = scenes[k]
+        img = im.imagine(state, obs, goal, SIMULATION, rules=rules)
+        assert np.array_equal(img.p, fresh[k].p) and np.array_equal(img.J, fresh[k].J)
