@@ -68,6 +68,7 @@ import time
 
 import numpy as np
 
+from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
 from .geometry import (Cluster, cluster_points, compact_mask, measure_clusters, scan_to_points,
@@ -83,6 +84,28 @@ def wall_obstacles(points: np.ndarray, cov_m2) -> Obstacles:
            else np.asarray(cov_m2, float).reshape(m, 2, 2))
     return Obstacles(np.asarray(points, float).reshape(m, 2), np.zeros((m, 2)), cov, np.zeros(m),
                      np.ones(m, bool), np.full(m, -1, int))
+
+
+@kernel
+def _split_candidates(owner, idx, n, static, compact):
+    """(len(n),) bool: the clusters (n[k] points each, their point indices concatenated in ``idx``) that
+    :meth:`Perception._segment` examines: points on two tracks' surfaces (``owner`` >= 0: the track index of
+    each point), or on a dynamic track's while the cluster is extended."""
+    m = n.shape[0]
+    out = np.zeros(m, np.bool_)
+    start = 0
+    for k in range(m):
+        lo, hi, walker = -1, -1, False
+        for i in idx[start:start + n[k]]:
+            o = owner[i]
+            if o < 0:
+                continue
+            lo = o if lo < 0 else min(lo, o)
+            hi = max(hi, o)
+            walker = walker or not static[o]
+        out[k] = hi >= 0 and (lo != hi or (walker and not compact[k]))
+        start += n[k]
+    return out
 
 
 class Perception:
@@ -134,17 +157,10 @@ class Perception:
         if len(owned) == 0:
             return clusters, is_compact
         # only clusters with points on two tracks, or on a walker while extended, can need a split
-        label = np.empty(len(sp.xy), int)
-        for k, cl in enumerate(clusters):
-            label[cl.idx] = k
-        lo = np.full(len(clusters), np.iinfo(int).max)
-        hi = np.full(len(clusters), -1)
-        np.minimum.at(lo, label[owned], owner[owned])
-        np.maximum.at(hi, label[owned], owner[owned])
-        walker = np.zeros(len(clusters), bool)
-        dyn = owned[~T.static[owner[owned]]]
-        walker[label[dyn]] = True
-        check = np.flatnonzero((hi >= 0) & ((lo != hi) | (walker & ~is_compact)))
+        check = np.flatnonzero(_split_candidates(
+            owner.astype(np.int64), np.concatenate([cl.idx for cl in clusters]).astype(np.int64),
+            np.array([len(cl.idx) for cl in clusters], np.int64), np.ascontiguousarray(T.static, dtype=np.bool_),
+            np.ascontiguousarray(is_compact, dtype=np.bool_)))
         if len(check) == 0:
             return clusters, is_compact
         out, flags, new = [], [], []

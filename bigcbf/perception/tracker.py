@@ -39,9 +39,12 @@ covariances: the object moves), the constant-position filter restarts from the C
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import Obstacles
 from .classify import hysteresis_step, speed_sigma
@@ -78,6 +81,23 @@ def cap_covariance(cov: np.ndarray, sigma_max) -> np.ndarray:
     cap = np.asarray(sigma_max, float) ** 2
     k = np.where(lam > cap, cap / np.maximum(lam, 1e-300), 1.0)
     return cov * k[:, None, None]
+
+
+@kernel
+def _nearest_circle(points, c, r, tol, conf, out):
+    """:meth:`Tracker.surface_owner`'s assignment, compiled: for each point the circle (c, r) nearest in
+    | |p - c| - r | (the first of equal ones, as np.argmin), taken when within its ``tol``: out[i] = conf[best]."""
+    for i in range(points.shape[0]):
+        best, dbest = 0, np.inf
+        for j in range(c.shape[0]):
+            d = abs(math.sqrt((points[i, 0] - c[j, 0]) ** 2 + (points[i, 1] - c[j, 1]) ** 2) - r[j])
+            if d != d:                 # np.argmin: the first NaN
+                best, dbest = j, d
+                break
+            if d < dbest:
+                best, dbest = j, d
+        if dbest <= tol[best]:
+            out[i] = conf[best]
 
 
 class Tracker:
@@ -158,14 +178,10 @@ class Tracker:
         conf = np.flatnonzero(self.confirmed)
         if len(conf) == 0 or len(points) == 0:
             return out
-        c, r = self.x[conf, :2], self.r[conf]
+        c, r = np.ascontiguousarray(self.x[conf, :2]), np.ascontiguousarray(self.r[conf])
         lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
         tol = self.params.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
-        d = np.abs(np.sqrt((points[:, None, 0] - c[None, :, 0]) ** 2 + (points[:, None, 1] - c[None, :, 1]) ** 2)
-                   - r[None, :])
-        best = np.argmin(d, axis=1)
-        ok = d[np.arange(len(points)), best] <= tol[best]
-        out[ok] = conf[best[ok]]
+        _nearest_circle(np.ascontiguousarray(points, dtype=float), c, r, tol, conf.astype(np.int64), out)
         return out
 
     def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -267,3 +267,65 @@ def test_degenerate_scans():
                                                                (-2, -9, -2, 9)]), (0.0, 0.0, 0.0), PR)
     got, want = G.cluster_points(sp, PR), ref_cluster_points(sp, PR)     # a closed room: one cluster all round
     assert len(got) == len(want) and all(np.array_equal(a.idx, b.idx) for a, b in zip(got, want))
+
+
+def ref_surface_owner(self, points):
+    """tracker.Tracker.surface_owner as of d27bf46."""
+    out = np.full(len(points), -1)
+    conf = np.flatnonzero(self.confirmed)
+    if len(conf) == 0 or len(points) == 0:
+        return out
+    c, r = self.x[conf, :2], self.r[conf]
+    lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
+    tol = self.params.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
+    d = np.abs(np.sqrt((points[:, None, 0] - c[None, :, 0]) ** 2 + (points[:, None, 1] - c[None, :, 1]) ** 2)
+               - r[None, :])
+    best = np.argmin(d, axis=1)
+    ok = d[np.arange(len(points)), best] <= tol[best]
+    out[ok] = conf[best[ok]]
+    return out
+
+
+def ref_split_candidates(owner, idx, n, static, compact):
+    """The cluster selection of pipeline.Perception._segment as of d27bf46."""
+    owned = np.flatnonzero(owner >= 0)
+    label = np.empty(len(owner), int)
+    label[idx] = np.repeat(np.arange(len(n)), n)
+    lo = np.full(len(n), np.iinfo(int).max)
+    hi = np.full(len(n), -1)
+    np.minimum.at(lo, label[owned], owner[owned])
+    np.maximum.at(hi, label[owned], owner[owned])
+    walker = np.zeros(len(n), bool)
+    dyn = owned[~static[owner[owned]]]
+    walker[label[dyn]] = True
+    return (hi >= 0) & ((lo != hi) | (walker & ~compact))
+
+
+def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch):
+    """Perception.update with every compiled piece against the same pipeline run on the reference copies."""
+    from bigcbf.perception import perf, pipeline
+    from bigcbf.perception.tracker import Tracker
+    rng = np.random.default_rng(3)
+    frames = []
+    for k in range(150):
+        t = 0.1 * k
+        pose = perf._robot(t)
+        peds = perf._pedestrians(t)
+        frames.append((ray_scan(pose, [(x, y, 0.25) for x, y, _, _ in peds], perf._WALLS, stamp=t, noise=0.01,
+                                rng=rng), pose))
+    perc = pipeline.Perception()
+    got = [perc.update(*f) for f in frames]
+    monkeypatch.setattr(pipeline, "cluster_points", ref_cluster_points)
+    monkeypatch.setattr(pipeline, "compact_mask", ref_compact_mask)
+    monkeypatch.setattr(pipeline, "measure_clusters", ref_measure_clusters)
+    monkeypatch.setattr(pipeline, "wall_candidates_many", ref_wall_candidates_many)
+    monkeypatch.setattr(pipeline, "_split_candidates", ref_split_candidates)
+    monkeypatch.setattr(Tracker, "surface_owner", ref_surface_owner)
+    perc = pipeline.Perception()
+    want = [perc.update(*f) for f in frames]
+    n_tracks = 0
+    for a, b in zip(got, want):
+        n_tracks += int((a.ids >= 0).sum())
+        for field in ("p", "v", "cov", "r", "static", "ids"):
+            assert np.array_equal(getattr(a, field), getattr(b, field)), field
+    assert n_tracks > 200                   # the walkers were tracked: the comparison covers the tracker too
