@@ -53,8 +53,8 @@ GRID = TUNING_DIR / "grid.toml"
 DEFAULTS = TUNING_DIR / "defaults.toml"
 #: what --write-shipped writes (the shipped tuned run configuration and the search's results)
 SHIPPED = {"tuned.toml": TUNING_DIR / "tuned.toml", "tuning.csv": TUNING_DIR / "results.csv",
-           "tuning.json": TUNING_DIR / "results.json"}
-OUTPUTS = ("results.sqlite", "tuning.csv", "tuning.json", "tuned.toml", "defaults.toml")
+           "tuning.json": TUNING_DIR / "results.json", "tuning.md": TUNING_DIR / "results.md"}
+OUTPUTS = ("results.sqlite", "tuning.csv", "tuning.json", "tuning.md", "tuned.toml", "defaults.toml")
 #: the budget of the protocol: configurations per method, the defaults among them
 BUDGET = 8
 SCALES = ("linear", "log")
@@ -560,6 +560,31 @@ def defaults_toml(grid: Grid) -> str:
             + tomli_w.dumps({"methods": tables}))
 
 
+def results_md(res: dict) -> str:
+    """The search as Markdown: its provenance, then per method a table of its configurations (chosen in bold)."""
+    from .stats import fmt_ci
+    code = res["code"]
+    lines = ["# Equal-budget tuning results", "",
+             f"Grid `{Path(res['grid']).name}` sha256 `{res['grid_sha']}`, code git `{code['git_commit']}` (code sha "
+             f"`{code['code_sha']}`), {code['utc']}; "
+             + ("the whole protocol." if res["complete_protocol"] else
+                f"a slice (worlds {', '.join(res.get('worlds', []))}), not for shipping."),
+             f"Selection: {res['selection']}", ""]
+    for m, r in res["methods"].items():
+        names = [p["name"].split(".")[-1] for p in r["params"]]
+        lines += [f"## {m}" + (f" (also {', '.join(r['shared_by'])})" if r["shared_by"] else ""), "",
+                  "| config | " + " | ".join(names) + " | success % [95 % CI] | at-fault | timeouts | time to goal (s) |",
+                  "|---:|" + "---:|" * len(names) + "---:|---:|---:|---:|"]
+        for s in r["configs"]:
+            b = "**" if s["config"] == r["chosen"] else ""
+            t = "-" if s["mean_time_to_goal_s"] is None else f"{s['mean_time_to_goal_s']:.1f}"
+            lines.append(f"| {b}{s['config']}{b} | " + " | ".join(str(v) for v in s["params"].values())
+                         + f" | {s['successes']}/{s['ok']}: {fmt_ci(s['success_pct'], s['success_ci95_pct'])} | "
+                         f"{s['at_fault_collisions']} | {s['timeouts']} | {t} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def write_outputs(out: Path, grid: Grid, res: dict) -> None:
     """tuning.csv, tuning.json and tuned.toml into ``out`` (atomically); tuned.toml is read back as a run
     configuration."""
@@ -567,6 +592,7 @@ def write_outputs(out: Path, grid: Grid, res: dict) -> None:
     from ..outputs import strict_json, write_text
     write_text(out / "tuning.csv", results_csv(res), "tuning results")
     write_text(out / "tuning.json", strict_json(res, indent=1) + "\n", "tuning results")
+    write_text(out / "tuning.md", results_md(res), "tuning results")
     write_text(out / "tuned.toml", tuned_toml(grid, res), "tuned run configuration")
     write_text(out / "defaults.toml", defaults_toml(grid), "defaults run configuration")
     load_run_config(out / "tuned.toml")
@@ -574,7 +600,7 @@ def write_outputs(out: Path, grid: Grid, res: dict) -> None:
 
 def write_shipped(out: str | Path, grid: Grid) -> list[Path]:
     """Copy a finished search's tuned.toml and results into bigcbf/params/tuning/ (tuned.toml, results.csv,
-    results.json). Refused unless ``out`` holds the whole protocol of ``grid`` (every method, configuration and
+    results.json, results.md). Refused unless ``out`` holds the whole protocol of ``grid`` (every method, configuration and
     world, no time-limit change), with a choice for every method."""
     from ..outputs import write_text
     out = Path(out)

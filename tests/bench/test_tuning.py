@@ -178,3 +178,30 @@ def test_shipped_defaults_file_is_the_authors_defaults():
     cfg, base = load_run_config(tuning.DEFAULTS, base=untuned()), untuned()
     for m in METHODS.names():
         assert cfg.stack_for(m) == base.stack_for(m) and cfg.method_params(m) == base.method_params(m)
+
+
+def test_write_shipped_needs_the_whole_protocol(tmp_path, monkeypatch):
+    """--write-shipped copies a search's files only when they hold the whole protocol of the grid as it is now, with
+    a choice for every method (the search's own files stand in here: the whole protocol is thousands of episodes)."""
+    g = load_grid()
+    out = tmp_path / "search"
+    out.mkdir()
+    res = {"complete_protocol": True, "grid_sha": g.sha, "methods": {m: {"chosen": 0} for m in g.methods}}
+    for name in tuning.SHIPPED:
+        (out / name).write_text(f"{name} of the search\n")
+    dest = {name: tmp_path / "shipped" / f"results_{name}" for name in tuning.SHIPPED}
+    monkeypatch.setattr(tuning, "SHIPPED", dest)
+
+    def ship(**changes):
+        (out / "tuning.json").write_text(json.dumps({**res, **changes}))
+        return tuning.write_shipped(out, g)
+
+    with pytest.raises(UserError, match="grid is now " + g.sha):
+        ship(grid_sha="0" * 16)
+    with pytest.raises(UserError, match="no choice for dwa"):
+        ship(methods={**res["methods"], "dwa": {"chosen": None}})
+    with pytest.raises(UserError, match="slice"):
+        ship(complete_protocol=False)
+    assert not any(p.exists() for p in dest.values())
+    assert sorted(ship()) == sorted(dest.values())
+    assert all(dest[n].read_text() == (out / n).read_text() for n in tuning.SHIPPED)
