@@ -213,11 +213,26 @@ _FINE = np.deg2rad(np.arange(-1.0, 1.0001, 0.05))
 def _edge_distances(points: np.ndarray, e1: np.ndarray, e2: np.ndarray):
     """For K orientations (unit axes e1, e2 (K,2)): the bounding rectangle's limits along e1 and e2 and each point's
     distance to the nearest edge (K, n)."""
-    a, b = e1 @ points.T, e2 @ points.T                                   # (K, n)
-    amin, amax = a.min(axis=1), a.max(axis=1)
-    bmin, bmax = b.min(axis=1), b.max(axis=1)
-    d = np.minimum(np.minimum(a - amin[:, None], amax[:, None] - a), np.minimum(b - bmin[:, None], bmax[:, None] - b))
+    a, b = e1 @ points.T, e2 @ points.T                                   # (K, n) (numpy's products: BLAS)
+    K = len(a)
+    amin, amax, bmin, bmax, d = np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(a.shape)
+    _edge_kernel(np.ascontiguousarray(a), np.ascontiguousarray(b), amin, amax, bmin, bmax, d)
     return amin, amax, bmin, bmax, d
+
+
+@kernel
+def _edge_kernel(a, b, amin, amax, bmin, bmax, d):
+    """:func:`_edge_distances` after the projections a, b (K, n): the limits along each axis and each point's
+    distance to the nearest edge, min(min(a - amin, amax - a), min(b - bmin, bmax - b)) (finite inputs)."""
+    K, n = a.shape
+    for k in range(K):
+        lo_a, hi_a, lo_b, hi_b = a[k, 0], a[k, 0], b[k, 0], b[k, 0]
+        for i in range(1, n):
+            lo_a, hi_a = min(lo_a, a[k, i]), max(hi_a, a[k, i])
+            lo_b, hi_b = min(lo_b, b[k, i]), max(hi_b, b[k, i])
+        amin[k], amax[k], bmin[k], bmax[k] = lo_a, hi_a, lo_b, hi_b
+        for i in range(n):
+            d[k, i] = min(min(a[k, i] - lo_a, hi_a - a[k, i]), min(b[k, i] - lo_b, hi_b - b[k, i]))
 
 
 def fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):

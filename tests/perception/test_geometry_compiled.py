@@ -101,6 +101,35 @@ def ref_wall_candidates_many(point_sets, robot_xy, spacing):
     return Q[sel[order]]
 
 
+def ref_edge_distances(points: np.ndarray, e1: np.ndarray, e2: np.ndarray):
+    a, b = e1 @ points.T, e2 @ points.T                                   # (K, n)
+    amin, amax = a.min(axis=1), a.max(axis=1)
+    bmin, bmax = b.min(axis=1), b.max(axis=1)
+    d = np.minimum(np.minimum(a - amin[:, None], amax[:, None] - a), np.minimum(b - bmin[:, None], bmax[:, None] - b))
+    return amin, amax, bmin, bmax, d
+
+
+def ref_fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):
+    *_, d = ref_edge_distances(points, G._COARSE_E1, G._COARSE_E2)
+    ang = G._COARSE[int(np.argmin(np.einsum("kn,kn->k", d, d)))] + G._FINE
+    c, sn = np.cos(ang), np.sin(ang)
+    e1s, e2s = np.stack([c, sn], axis=1), np.stack([-sn, c], axis=1)
+    amin, amax, bmin, bmax, d = ref_edge_distances(points, e1s, e2s)
+    j = int(np.argmin(np.einsum("kn,kn->k", d, d)))
+    e1, e2 = e1s[j], e2s[j]
+    la, lb = float(amax[j] - amin[j]), float(bmax[j] - bmin[j])
+    center = (amax[j] + amin[j]) / 2 * e1 + (bmax[j] + bmin[j]) / 2 * e2
+    rms = float(np.sqrt(np.mean(d[j] ** 2)))
+    short, long_ = min(la, lb), max(la, lb)
+    normal = e2 if la >= lb else e1
+    if normal @ (center - sensor) < 0:
+        normal = -normal
+    center = center + (long_ - short) / 2 * normal
+    if full:
+        return center, long_ / np.sqrt(2), rms, np.stack([e1, e2]), (la, lb)
+    return center, long_ / np.sqrt(2), rms
+
+
 def ref_measure_clusters(sp, clusters, params):
     """geometry.measure_clusters as of d27bf46."""
     m = len(clusters)
@@ -190,7 +219,7 @@ def ref_measure_clusters(sp, clusters, params):
         if tol[j] > 0 and rms[j] <= tol[j]:
             rect, rms_rect = None, np.inf
         else:
-            rect = G.fit_rectangle(pts, sensor, full=True)
+            rect = ref_fit_rectangle(pts, sensor, full=True)
             rms_rect = rect[2]
         if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
             cov = G._circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
@@ -199,7 +228,7 @@ def ref_measure_clusters(sp, clusters, params):
                                    bool(rms[j] <= rms_rect)))
             continue
         if rect is None:
-            rect = G.fit_rectangle(pts, sensor, full=True)
+            rect = ref_fit_rectangle(pts, sensor, full=True)
         rc, rrad, rms_rect, axes, lengths = rect
         cov = G.rectangle_covariance(pts, axes, lengths, sensor, sp.angle_increment, pr)
         out.append(G.Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
