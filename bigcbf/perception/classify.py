@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 
 
@@ -34,14 +35,32 @@ def speed_sigma(v: np.ndarray, Pv: np.ndarray) -> np.ndarray:
 
 def hysteresis_step(static: np.ndarray, n_dyn: np.ndarray, n_stat: np.ndarray, speed: np.ndarray,
                     sigma: np.ndarray, params: PerceptionParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One update of the classification of N tracks; returns new (static, n_dyn, n_stat) arrays."""
-    fast = (speed > params.v_dynamic_mps) & (speed > params.dynamic_sigma * sigma)
-    slow = speed < params.v_static_mps
-    n_dyn = np.where(static & fast, n_dyn + 1, 0)
-    n_stat = np.where(~static & slow, n_stat + 1, 0)
-    to_dyn = static & (n_dyn >= params.n_dynamic)
-    to_stat = ~static & (n_stat >= params.n_static)
-    static = (static & ~to_dyn) | to_stat
-    n_dyn = np.where(to_dyn, 0, n_dyn)
-    n_stat = np.where(to_stat, 0, n_stat)
-    return static, n_dyn, n_stat
+    """One update of the classification of N tracks; returns new (static, n_dyn, n_stat) arrays (compiled:
+    :func:`_hysteresis`)."""
+    static = np.ascontiguousarray(static, dtype=np.bool_).reshape(-1)
+    N = len(static)
+    out = (np.empty(N, np.bool_), np.empty(N, np.int64), np.empty(N, np.int64))
+    _hysteresis(static, np.ascontiguousarray(n_dyn, dtype=np.int64).reshape(-1),
+                np.ascontiguousarray(n_stat, dtype=np.int64).reshape(-1),
+                np.ascontiguousarray(speed, dtype=float).reshape(-1), np.ascontiguousarray(sigma, dtype=float).reshape(-1),
+                float(params.v_dynamic_mps), float(params.dynamic_sigma), float(params.v_static_mps),
+                int(params.n_dynamic), int(params.n_static), *out)
+    return out
+
+
+@kernel
+def _hysteresis(static, n_dyn, n_stat, speed, sigma, v_dynamic, dynamic_sigma, v_static, n_dynamic, n_static,
+                out_static, out_dyn, out_stat):
+    """The module docstring's rules, track by track: a significant speed above v_dynamic counts towards
+    DYNAMIC, a speed below v_static towards STATIC; a class changes after n_dynamic / n_static such updates in a
+    row (the counter then restarts at 0)."""
+    for i in range(static.shape[0]):
+        fast = speed[i] > v_dynamic and speed[i] > dynamic_sigma * sigma[i]
+        slow = speed[i] < v_static
+        nd = n_dyn[i] + 1 if static[i] and fast else 0
+        ns = n_stat[i] + 1 if not static[i] and slow else 0
+        to_dyn = static[i] and nd >= n_dynamic
+        to_stat = not static[i] and ns >= n_static
+        out_static[i] = (static[i] and not to_dyn) or to_stat
+        out_dyn[i] = 0 if to_dyn else nd
+        out_stat[i] = 0 if to_stat else ns

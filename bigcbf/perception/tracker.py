@@ -100,6 +100,22 @@ def _nearest_circle(points, c, r, tol, conf, out):
             out[i] = conf[best]
 
 
+@kernel
+def _gate(z, radii, R, x, P, r, chi2, gate_min, gate_max, gate_radius, infeasible, cost, ok):
+    """:meth:`Tracker.associate`'s gate and cost (n tracks, m measurements) into ``cost`` and ``ok`` (n, m):
+    y = z_j - p_i, S = P_i[:2, :2] + R_j, Mahalanobis distance squared as ``kalman.mahalanobis2``, in its order."""
+    for i in range(x.shape[0]):
+        for j in range(z.shape[0]):
+            y0, y1 = z[j, 0] - x[i, 0], z[j, 1] - x[i, 1]
+            dist = math.sqrt(y0 * y0 + y1 * y1)
+            a, b = P[i, 0, 0] + R[j, 0, 0], P[i, 0, 1] + R[j, 0, 1]
+            c, d = P[i, 1, 0] + R[j, 1, 0], P[i, 1, 1] + R[j, 1, 1]
+            d2 = (d * y0 * y0 - (b + c) * y0 * y1 + a * y1 * y1) / (a * d - b * c)
+            good = (d2 <= chi2 or dist <= gate_min) and dist <= gate_max and abs(radii[j] - r[i]) <= gate_radius
+            ok[i, j] = good
+            cost[i, j] = dist if good else infeasible
+
+
 class Tracker:
     """Tracks of compact objects in odom (see the module docstring)."""
 
@@ -194,13 +210,11 @@ class Tracker:
         pr = self.params
         if R is None:
             R = self.measurement_covariance(None, m)
-        y = z[None, :, :] - self.x[:, None, :2]                              # (n, m, 2)
-        dist = np.linalg.norm(y, axis=2)
-        S = self.P[:, None, :2, :2] + R[None, :, :, :]
-        d2 = mahalanobis2(y, S)
-        ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
-        ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
-        cost = np.where(ok, dist, _INFEASIBLE)
+        cost, ok = np.empty((n, m)), np.empty((n, m), np.bool_)
+        _gate(np.ascontiguousarray(z, dtype=float), np.ascontiguousarray(radii, dtype=float),
+              np.ascontiguousarray(R, dtype=float), np.ascontiguousarray(self.x), np.ascontiguousarray(self.P),
+              np.ascontiguousarray(self.r), float(pr.gate_chi2), float(pr.gate_min_m), float(pr.gate_max_m),
+              float(pr.gate_radius_m), _INFEASIBLE, cost, ok)
         rows, cols = linear_sum_assignment(cost)
         good = ok[rows, cols]
         return rows[good], cols[good]

@@ -350,6 +350,9 @@ def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch):
     monkeypatch.setattr(pipeline, "wall_candidates_many", ref_wall_candidates_many)
     monkeypatch.setattr(pipeline, "_split_candidates", ref_split_candidates)
     monkeypatch.setattr(Tracker, "surface_owner", ref_surface_owner)
+    monkeypatch.setattr(Tracker, "associate", ref_associate)
+    from bigcbf.perception import tracker
+    monkeypatch.setattr(tracker, "hysteresis_step", ref_hysteresis_step)
     perc = pipeline.Perception()
     want = [perc.update(*f) for f in frames]
     n_tracks = 0
@@ -358,3 +361,50 @@ def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch):
         for field in ("p", "v", "cov", "r", "static", "ids"):
             assert np.array_equal(getattr(a, field), getattr(b, field)), field
     assert n_tracks > 200                   # the walkers were tracked: the comparison covers the tracker too
+
+
+def ref_associate(self, z, radii, R=None):
+    """tracker.Tracker.associate as of d27bf46."""
+    from scipy.optimize import linear_sum_assignment
+    from bigcbf.perception.kalman import mahalanobis2
+    n, m = len(self), len(z)
+    if n == 0 or m == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    pr = self.params
+    if R is None:
+        R = self.measurement_covariance(None, m)
+    y = z[None, :, :] - self.x[:, None, :2]
+    dist = np.linalg.norm(y, axis=2)
+    S = self.P[:, None, :2, :2] + R[None, :, :, :]
+    d2 = mahalanobis2(y, S)
+    ok = ((d2 <= pr.gate_chi2) | (dist <= pr.gate_min_m)) & (dist <= pr.gate_max_m)
+    ok &= np.abs(radii[None, :] - self.r[:, None]) <= pr.gate_radius_m
+    cost = np.where(ok, dist, 1e9)
+    rows, cols = linear_sum_assignment(cost)
+    good = ok[rows, cols]
+    return rows[good], cols[good]
+
+
+def ref_hysteresis_step(static, n_dyn, n_stat, speed, sigma, params):
+    """classify.hysteresis_step as of d27bf46."""
+    fast = (speed > params.v_dynamic_mps) & (speed > params.dynamic_sigma * sigma)
+    slow = speed < params.v_static_mps
+    n_dyn = np.where(static & fast, n_dyn + 1, 0)
+    n_stat = np.where(~static & slow, n_stat + 1, 0)
+    to_dyn = static & (n_dyn >= params.n_dynamic)
+    to_stat = ~static & (n_stat >= params.n_static)
+    static = (static & ~to_dyn) | to_stat
+    n_dyn = np.where(to_dyn, 0, n_dyn)
+    n_stat = np.where(to_stat, 0, n_stat)
+    return static, n_dyn, n_stat
+
+
+def test_hysteresis_step_is_the_numpy_rules():
+    from bigcbf.perception.classify import hysteresis_step
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        N = int(rng.integers(0, 9))
+        args = (rng.random(N) < 0.5, rng.integers(0, 4, N), rng.integers(0, 4, N), rng.uniform(0, 1, N),
+                rng.uniform(0, 0.3, N))
+        for a, b in zip(hysteresis_step(*args, PR), ref_hysteresis_step(*args, PR)):
+            assert np.array_equal(a, b) and a.dtype == b.dtype
