@@ -51,6 +51,7 @@ from .liveness import mode_side
 
 EVIDENCE_LEAK = 0.7   # lambda: the share of the evidence kept from one selection to the next [-]
 EVIDENCE_MAX = 10.0   # e_max: the evidence is clipped to [0, e_max] [J s]
+EVIDENCE_CAP = 1.0    # D - D_floor counts at most this much per selection [J] (COMPASS's costs are normalized)
 GATE_M = 0.5     # a new obstacle within this of a member's predicted position belongs to its encounter [m]
 LOST_S = 1.0     # an encounter none of whose members was seen for this long ends [s]
 
@@ -78,11 +79,15 @@ class Encounter:
 
 def accumulate_evidence(evidence: float, advantage: float, params: StackParams) -> float:
     """COMPASS's leaky evidence (kjungmo/compass, Sec. "Accumulating Evidence"), per selection:
-    e <- clip(lambda e + (D - D_floor) T_B, 0, e_max), D = J_keep - J_other the other side's advantage in
-    ``eq:behavior_cost`` (14) (the best viable mode the commitment allows against the best of the other side),
-    D_floor = w_sw (a side flip undoes a maneuver: it is charged as a second switch), lambda = ``EVIDENCE_LEAK``.
-    A constant advantage D > w_sw reaches a threshold E only if (D - w_sw) T_B / (1 - lambda) > E."""
-    e = EVIDENCE_LEAK * evidence + (advantage - params.w_sw) * params.T_B_s
+    e <- clip(lambda e + min(D - D_floor, D_cap) T_B, 0, e_max), D = J_keep - J_other the other side's advantage
+    in ``eq:behavior_cost`` (14) (the best viable mode the commitment allows against the best of the other side),
+    D_floor = w_sw (a side flip undoes a maneuver: it is charged as a second switch), lambda = ``EVIDENCE_LEAK``,
+    D_cap = ``EVIDENCE_CAP``. COMPASS normalizes its costs to [0, 1]; J is not normalized, and next to an obstacle
+    W of ``eq:analytic_workload`` (24) makes single selections' D jump by 5-10 (traced while overtaking a slow
+    walker in a 2 m corridor), so the cap makes the evidence a matter of time: with T_B = 0.5 s, at most 0.5 per
+    selection, 0.5, 0.85, 1.10, 1.27, ... (limit 1.67) over consecutive selections; 1.2 takes four in a row (2 s).
+    A constant advantage D reaches a threshold E only if min(D - w_sw, D_cap) T_B / (1 - lambda) > E."""
+    e = EVIDENCE_LEAK * evidence + min(advantage - params.w_sw, EVIDENCE_CAP) * params.T_B_s
     return float(min(max(e, 0.0), EVIDENCE_MAX))
 
 

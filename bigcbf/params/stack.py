@@ -333,7 +333,7 @@ class PlusRules:
     speed_governor: bool = False  # the liveness option (bigcbf.control.governor) [on/off]
     encounter_commitment: bool = True  # keep the passing side per encounter (control/encounters.py) [on/off]
     commit_release_selections: int = ranged(3, 1, 100)  # K: selections with the side infeasible before release [-]
-    commit_evidence_js: float = ranged(1.5, 0, 1e6)  # evidence for the other side that releases the side [J s]
+    commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
 
     def __post_init__(self):

@@ -71,7 +71,7 @@ def test_the_committed_side_is_kept_until_infeasible_for_k_selections():
     # PASS-L is the best: selected, and the encounter commits to the left
     assert sel.select(0.0, _img([1, 1, 1, 1, 1], [1, 0, 0.5, 2, 2]), enc).mode == "PASS-L" and enc.side == 1
     # PASS-R better by 1.0 (> the threshold plus w_sw) at every selection: without the rule it would switch; with
-    # it the left side is kept (the evidence, (1.0 - w_sw) T_B per selection with leak 0.7, stays below 1.5)
+    # it the left side is kept (the evidence, (1.0 - w_sw) T_B per selection with leak 0.7, stays below 0.84 < 1.2)
     for k in range(6):
         assert sel.select(2.0 + k, _img([1, 1, 1, 1, 1], [1, 0.5, -0.5, 2, 2]), enc).mode == "PASS-L"
     assert 0 < enc.evidence < rules.commit_evidence_js
@@ -91,13 +91,15 @@ def test_a_lasting_large_advantage_of_the_other_side_releases_the_commitment_a_s
     sel = BehaviorSelector(P, PlusRules())
     enc = EncounterTracker(P).update(0.0, (0.0, 0.0), GOAL, _post(2.0, 0.0))
     assert sel.select(0.0, _img([1, 1, 1, 1, 1], [1, 0, 0.5, 2, 2]), enc).mode == "PASS-L"
-    big, calm = _img([1, 1, 1, 1, 1], [1, 0.5, -2.5, 2, 2]), _img([1, 1, 1, 1, 1], [1, 0.5, 0.6, 2, 2])
-    # one selection with PASS-R better by 3.0: evidence (3.0 - 0.5) 0.5 = 1.25 < 1.5, the side is kept
-    assert sel.select(2.0, big, enc).mode == "PASS-L" and enc.evidence == pytest.approx(1.25)
-    # PASS-R worse by 0.1: 0.7 1.25 + (-0.1 - 0.5) 0.5 = 0.575
-    assert sel.select(3.0, calm, enc).mode == "PASS-L" and enc.evidence == pytest.approx(0.575)
-    # the advantage comes back: 0.7 0.575 + 1.25 = 1.65 >= 1.5 releases, and PASS-R is taken
-    assert sel.select(4.0, big, enc).mode == "PASS-R" and enc.side == -1 and enc.evidence == 0.0
+    big, calm = _img([1, 1, 1, 1, 1], [1, 0.5, -7.5, 2, 2]), _img([1, 1, 1, 1, 1], [1, 0.5, 0.6, 2, 2])
+    # one selection with PASS-R better by 8.0: its evidence is capped, min(8.0 - w_sw, 1.0) T_B = 0.5: kept
+    assert sel.select(2.0, big, enc).mode == "PASS-L" and enc.evidence == pytest.approx(0.5)
+    # PASS-R worse by 0.1: 0.7 0.5 + (-0.1 - 0.5) 0.5 = 0.05
+    assert sel.select(3.0, calm, enc).mode == "PASS-L" and enc.evidence == pytest.approx(0.05)
+    # the advantage lasts: 0.535, 0.8745, 1.112, then 1.279 >= 1.2 releases at the fourth, and PASS-R is taken
+    for k, e in enumerate((0.535, 0.8745, 1.11215)):
+        assert sel.select(4.0 + k, big, enc).mode == "PASS-L" and enc.evidence == pytest.approx(e)
+    assert sel.select(7.0, big, enc).mode == "PASS-R" and enc.side == -1 and enc.evidence == 0.0
 
 
 def test_the_papers_big_cbf_keeps_no_encounters_and_judges_at_full_speed():
