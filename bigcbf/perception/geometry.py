@@ -622,18 +622,35 @@ def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents):
             dents[g[i]] = val
 
 
+@kernel
+def _fitted_circle_cov(a11, a12, a22, a13, a23, a33, sigma_max, C):
+    """:func:`_circle_cov_from_sums` with the radius fitted, into C (2, 2): the centre block of the inverse of
+    [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]] (cofactors / det; cap^2 I when not positive definite or
+    not finite), then :func:`_cap_std`; numpy's scalar arithmetic in its order."""
+    cap = sigma_max ** 2
+    c11 = a22 * a33 - a23 * a23
+    c12 = -(a12 * a33 - a23 * a13)
+    c22 = a11 * a33 - a13 * a13
+    det = a11 * c11 + a12 * c12 + a13 * (a12 * a23 - a22 * a13)
+    x11, x12, x22 = c11 / det, c12 / det, c22 / det
+    if not det > 0 or not (math.isfinite(x11) and math.isfinite(x12) and math.isfinite(x22)):
+        C[0, 0], C[0, 1], C[1, 0], C[1, 1] = cap, 0.0, 0.0, cap
+        return
+    lam = 0.5 * (x11 + x22) + math.sqrt(0.25 * (x11 - x22) ** 2 + x12 * x12)
+    k = sigma_max ** 2 / lam if lam > sigma_max ** 2 else 1.0
+    if lam > sigma_max ** 2:
+        x11, x12, x22 = x11 * k, x12 * k, x22 * k
+    C[0, 0], C[0, 1], C[1, 0], C[1, 1] = x11, x12, x12, x22
+
+
 def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
     """circle_fit_covariance from the entries of J^T W J (closed-form inverses)."""
     cap = params.radius_max_m ** 2
     if fit_radius:
-        # centre block of the inverse of [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]]: cofactors / det
-        c11 = a22 * a33 - a23 * a23
-        c12 = -(a12 * a33 - a23 * a13)
-        c22 = a11 * a33 - a13 * a13
-        det = a11 * c11 + a12 * c12 + a13 * (a12 * a23 - a22 * a13)
-        if not det > 0:
-            return cap * np.eye(2)
-        C = np.array([[c11, c12], [c12, c22]]) / det
+        C = np.empty((2, 2))
+        _fitted_circle_cov(float(a11), float(a12), float(a22), float(a13), float(a23), float(a33),
+                           float(params.radius_max_m), C)
+        return C
     else:
         det = a11 * a22 - a12 * a12
         if not det > 0:

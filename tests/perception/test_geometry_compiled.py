@@ -130,6 +130,31 @@ def ref_fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False
     return center, long_ / np.sqrt(2), rms
 
 
+def ref_circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
+    """circle_fit_covariance from the entries of J^T W J (closed-form inverses)."""
+    cap = params.radius_max_m ** 2
+    if fit_radius:
+        # centre block of the inverse of [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]]: cofactors / det
+        c11 = a22 * a33 - a23 * a23
+        c12 = -(a12 * a33 - a23 * a13)
+        c22 = a11 * a33 - a13 * a13
+        det = a11 * c11 + a12 * c12 + a13 * (a12 * a23 - a22 * a13)
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[c11, c12], [c12, c22]]) / det
+    else:
+        det = a11 * a22 - a12 * a12
+        if not det > 0:
+            return cap * np.eye(2)
+        C = np.array([[a22, -a12], [-a12, a11]]) / det
+        ray = center - sensor
+        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    if not np.all(np.isfinite(C)):
+        return cap * np.eye(2)
+    return G._cap_std(C, params.radius_max_m)
+
+
 def ref_measure_clusters(sp, clusters, params):
     """geometry.measure_clusters as of d27bf46."""
     m = len(clusters)
@@ -222,7 +247,7 @@ def ref_measure_clusters(sp, clusters, params):
             rect = ref_fit_rectangle(pts, sensor, full=True)
             rms_rect = rect[2]
         if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
-            cov = G._circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
+            cov = ref_circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
                                         c[j], sensor, pr)
             out.append(G.Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
                                    bool(rms[j] <= rms_rect)))
