@@ -70,19 +70,32 @@ def robot_names() -> tuple[str, ...]:
     return tuple(ROBOTS)
 
 
+def robot_folder_path(name) -> Path | None:
+    """``name`` as a robot folder outside the registry (a path to a folder ``D`` holding ``D/<D's name>.xml`` and
+    ``D/scene.xml``, as ``bigcbf calibrate --model`` writes one), or None."""
+    if not isinstance(name, str) or name in ROBOTS or not name.strip():
+        return None
+    d = Path(name)
+    return d if d.is_dir() and (d / f"{d.resolve().name}.xml").is_file() and (d / "scene.xml").is_file() else None
+
+
 def check_robot_name(name) -> str:
-    """``name`` if it is a registered robot, else a ValueError whose message lists the known ones."""
-    if not isinstance(name, str) or name not in ROBOTS:
-        raise ValueError(f"unknown robot {str(name)[:60]!r}; known: {', '.join(ROBOTS)} (bigcbf/robots.py)")
+    """``name`` if it is a registered robot or a robot folder's path, else a ValueError whose message lists the
+    known ones."""
+    if not isinstance(name, str) or (name not in ROBOTS and robot_folder_path(name) is None):
+        raise ValueError(f"unknown robot {str(name)[:60]!r}; known: {', '.join(ROBOTS)} (bigcbf/robots.py), or a "
+                         "robot folder's path (D/<D>.xml and D/scene.xml)")
     return name
 
 
 def folder(name: str) -> Path:
-    """The robot's folder (``bigcbf/assets/<folder>``); an unknown name is a UserError."""
+    """The robot's folder (``bigcbf/assets/<folder>``, or the folder a path names); an unknown name is a
+    UserError."""
     try:
-        return ASSETS / ROBOTS[check_robot_name(name)].folder
+        check_robot_name(name)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    return ASSETS / ROBOTS[name].folder if name in ROBOTS else robot_folder_path(name)
 
 
 def scene_path(name: str) -> Path:
@@ -144,7 +157,8 @@ def _yaw(q) -> float:
 
 
 def _bad(name: str, what: str) -> UserError:
-    return UserError(f"robot {name!r}: {what}", file=str(folder(name) / f"{name}.xml"))
+    d = folder(name)
+    return UserError(f"robot {name!r}: {what}", file=str(d / f"{name if name in ROBOTS else d.resolve().name}.xml"))
 
 
 @functools.lru_cache(maxsize=None)
@@ -157,9 +171,10 @@ def robot(name: str = DEFAULT_ROBOT) -> Robot:
 
     from .sim.truth import outline_from_model
     d = folder(name)
-    xml = d / f"{name}.xml"
+    stem = name if name in ROBOTS else d.resolve().name
+    xml = d / f"{stem}.xml"
     if not xml.is_file() or not (d / "scene.xml").is_file():
-        raise UserError(f"robot {name!r}: its folder needs {name}.xml and scene.xml", file=str(d))
+        raise UserError(f"robot {name!r}: its folder needs {stem}.xml and scene.xml", file=str(d))
     m = mujoco.MjModel.from_xml_path(str(xml))
     obj = mujoco.mjtObj
     base = mujoco.mj_name2id(m, obj.mjOBJ_BODY, "base_link")
@@ -232,7 +247,8 @@ def robot(name: str = DEFAULT_ROBOT) -> Robot:
         return x, y, z + base_z, _yaw(m.site_quat[s])
 
     fp = mujoco.mj_name2id(m, obj.mjOBJ_SITE, "footprint")
-    return Robot(name=name, folder=d, xml=xml, scene_xml=d / "scene.xml", profile=ROBOTS[name].profile,
+    return Robot(name=name, folder=d, xml=xml, scene_xml=d / "scene.xml",
+                 profile=ROBOTS[name].profile if name in ROBOTS else ROBOTS[DEFAULT_ROBOT].profile,
                  wheels=tuple(w[0] for w in ws), actuators=tuple(w[1] for w in ws),
                  wheel_positions=tuple(w[2] for w in ws), half_wheelbase_m=lx, half_track_m=ly,
                  wheel_radius_m=radii.pop(), roller_slopes=slopes, max_wheel_speed_rad_s=speeds.pop(),

@@ -53,8 +53,9 @@ MIN_COMMANDED_M = 0.5      # ... once the commanded path is at least this long [
 
 
 def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, duration_s: float = 60.0,
-                       limits: DriveLimits = DriveLimits()) -> dict:
+                       limits: DriveLimits = DriveLimits(), robot: str | None = None) -> dict:
     """Drive the calibration program on a robot with ``profile``; write the log to ``out`` (module docstring).
+    ``robot``: the robot (a registered name or a robot folder's path, ``bigcbf/robots.py``; None: the default).
     Returns a summary (messages per topic, duration, the largest distance from the start, the re-centrings).
 
     Length: one tick loop writing each topic at its own rate from the same world state, inside the temporary-file try
@@ -66,7 +67,11 @@ def record_calibration(profile: RobotProfile, out: str | Path, seed: int = 0, du
     if out.is_dir():
         raise UserError("is a directory, expected an .mcap file path", file=str(out))
     drive = CalibrationDrive(duration_s, limits, seed, dt=CMD_EVERY * TICK_S)
-    world = SimWorld(open_room(extent=ROOM_EXTENT_M), profile=profile, seed=seed)
+    room = open_room(extent=ROOM_EXTENT_M)
+    if robot is not None:
+        from dataclasses import replace
+        room = replace(room, robot=str(robot))
+    world = SimWorld(room, profile=profile, seed=seed)
     cov = WorldCovariances(world)
     steps = int(round(TICK_S / world.dt))
     n_ticks = int(round(duration_s / TICK_S))

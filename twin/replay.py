@@ -71,6 +71,8 @@ class ReplayOptions:
     fit: bool = False
     fit_window_s: float = ranged(20.0, MIN_WINDOW_S, MAX_WINDOW_S)  # the part of the log the fit replays [s]
     fit_evals: int = ranged(40, 1, 10000)  # replays the fit may spend
+    holdout: float = ranged(0.0, 0.0, 0.9)  # score on this last fraction of the log; calibrate on the rest
+    model: bool = False                     # also fit the MuJoCo model (twin.model_fit, mujoco.sysid)
     video_fps: float = ranged(10.0, 1, 120)
 
     def __post_init__(self):
@@ -200,7 +202,7 @@ def compare(runs: dict[str, ReplayRun], identified, window_s: float, cal=None) -
     warning per score on which it is worse than the nominal run, with what is known about why."""
     notes = []
     nominal = runs["nominal"]
-    for name in ("calibrated", "fitted"):
+    for name in ("calibrated", "fitted", "model"):
         if name not in runs:
             continue
         run = runs[name]
@@ -212,7 +214,8 @@ def compare(runs: dict[str, ReplayRun], identified, window_s: float, cal=None) -
             nums = f"({name} {_fmt(s.model, s.resolution)}, nominal {_fmt(s.nominal, s.resolution)} {s.unit})"
             if s.label.startswith("rmse"):
                 j = AXES.index(s.label.split()[-1])
-                why = why_worse(j, cal, nominal, run) if name == "calibrated" else "fitted on the first part only"
+                why = why_worse(j, cal, nominal, run) if name == "calibrated" else \
+                    f"the {name} replay was fitted on {'the first part' if name == 'model' else 'the first seconds'} only"
                 notes.append(f"WORSE: the {name} replay tracks {AXES[j]} worse than the nominal one {nums}"
                              + (f": {why}" if why else ""))
             else:
@@ -228,6 +231,8 @@ class ReplayResult:
     runs: dict[str, ReplayRun]
     notes: list[str] = field(default_factory=list)
     identified: np.ndarray | None = None      # the axes the calibration identified (the comparison's axes)
+    scored_from: float | None = None          # with a held-out part: its first log time (scores from there on)
+    model_fit: object | None = None           # twin.model_fit.ModelFit of the "model" run (None: given or none)
 
     @property
     def scores(self) -> list[Score]:
@@ -256,7 +261,12 @@ class ReplayResult:
                          "runs": {k: r.to_json() for k, r in self.runs.items()},
                          "identified": None if self.identified is None else
                          {a: bool(x) for a, x in zip(AXES, self.identified)},
-                         "verdict": verdict, "calibrated_worse_on": self.worse_on, "notes": self.notes})
+                         "verdict": verdict, "calibrated_worse_on": self.worse_on, "notes": self.notes,
+                "scored_from_s": None if self.scored_from is None else self.scored_from - self._t0(),
+                "model_fit": None if self.model_fit is None else self.model_fit.to_json()})
+
+    def _t0(self) -> float:
+        return float(self.runs["nominal"].t[0])
 
 
 # --- simulation ----------------------------------------------------------------------------------------------
@@ -264,14 +274,16 @@ def _wrap(a):
     return np.arctan2(np.sin(a), np.cos(a))
 
 
-def scene_for(pose_xy: np.ndarray):
+def scene_for(pose_xy: np.ndarray, robot: str | None = None):
     """An open floor (no walls) framing the logged path (plus 30 % and 0.5 m for the replays' own paths): the
-    top camera looks at its centre."""
+    top camera looks at its centre. ``robot``: a registered robot or a robot folder's path (default: the
+    default robot)."""
     from bigcbf.sim.scene import SceneSpec
     lo, hi = pose_xy.min(axis=0), pose_xy.max(axis=0)
     c = (lo + hi) / 2
     extent = float(0.65 * max(hi - lo) + 0.5)
-    return SceneSpec(extent=extent, robot_start=(float(c[0]), float(c[1]), 0.0))
+    spec = SceneSpec(extent=extent, robot_start=(float(c[0]), float(c[1]), 0.0))
+    return spec if robot is None else dataclasses.replace(spec, robot=str(robot))
 
 
 def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: RobotProfile, t_end: float | None = None,
@@ -334,13 +346,14 @@ def simulate(cmd_t: np.ndarray, cmd_u: np.ndarray, odom: OdomSeries, profile: Ro
     return ts, pose, twist
 
 
-def errors(run: ReplayRun, odom: OdomSeries, window_s: float) -> ReplayRun:
-    """Fill the run's errors against the logged odometry (module docstring)."""
+def errors(run: ReplayRun, odom: OdomSeries, window_s: float, t_from: float | None = None) -> ReplayRun:
+    """Fill the run's errors against the logged odometry (module docstring); ``t_from``: score only the samples
+    from that log time on (the held-out part of a log; the drift windows start there)."""
     k = np.searchsorted(odom.t, run.t)
     log_pose, log_twist = odom.pose[k], odom.twist[k]
-    run.rmse = np.sqrt(np.mean((run.twist[1:] - log_twist[1:]) ** 2, axis=0))
+    a = 0 if t_from is None else min(int(np.searchsorted(run.t, t_from)), len(run.t) - 1)
+    run.rmse = np.sqrt(np.mean((run.twist[max(a, 1):] - log_twist[max(a, 1):]) ** 2, axis=0))
     drifts, yaws, starts = [], [], []
-    a = 0
     while True:
         b = int(np.searchsorted(run.t, run.t[a] + window_s))
         if b >= len(run.t):
@@ -363,9 +376,9 @@ def errors(run: ReplayRun, odom: OdomSeries, window_s: float) -> ReplayRun:
 
 
 def run_profile(name: str, data: LogData, profile: RobotProfile, window_s: float, t_end=None, scene=None,
-                frame=None, fps: float = 10.0, period_s: float | None = None) -> ReplayRun:
+                frame=None, fps: float = 10.0, period_s: float | None = None, t_from: float | None = None) -> ReplayRun:
     t, pose, twist = simulate(data.cmd.t, data.cmd.u, data.odom, profile, t_end, scene, frame, fps, period_s)
-    return errors(ReplayRun(name, profile, t, pose, twist), data.odom, window_s)
+    return errors(ReplayRun(name, profile, t, pose, twist), data.odom, window_s, t_from)
 
 
 # --- the calibrated model --------------------------------------------------------------------------------------
@@ -461,16 +474,11 @@ def response_shift(run: ReplayRun, odom: OdomSeries, axes, max_s: float = 0.3, g
     return float((_refine(curve, k) - n) * grid_s)
 
 
-def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOptions = ReplayOptions(),
-           video: str | Path | None = None, cal_opt: CalibrationOptions = CalibrationOptions()) -> ReplayResult:
-    """Replay with the nominal and the calibrated (and, with opt.fit, the fitted) profiles; optional video.
-
-    Length: to be split (issue 22): the input checks, the choice of the execution model (with its fallbacks) and the
-    runs are separate stages in one body."""
+def _checked(data: LogData, cal_opt: CalibrationOptions):
+    """The replay's input checks on the log put on its analysis time base: (data, timing, time-base notes, notes)."""
     if data.cmd is None or data.odom is None:
         raise UserError("replay needs commands and odometry", file=str(data.path))
     notes: list[str] = []
-    raw = data
     data, timing, tb_notes = prepare(data, cal_opt.timebase)
     if len(data.cmd.t) == 0 or len(data.odom.t) == 0:
         raise UserError(f"nothing to replay: {len(data.cmd.t)} commands ({data.cmd.topic}) and {len(data.odom.t)} "
@@ -488,28 +496,35 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     k0 = max(int(np.searchsorted(data.odom.t, data.cmd.t[0], side="right")) - 1, 0)
     if np.linalg.norm(data.odom.twist[k0, :2]) > 0.05:
         notes.append("the robot was moving at the first command; the replay starts it at rest")
-    scene = scene_for(data.odom.pose[:, :2])
-    P = timing.period_s
-    nominal = run_profile("nominal", data, RobotProfile(), opt.window_s, scene=scene, period_s=P)
-    runs = {"nominal": nominal}
-    # the log's own model (with a given profile only its dead time is needed, so a log too weak to calibrate still
-    # replays), and the nominal model's response to the same commands
-    cal = None
-    try:
-        cal = calibrate_series(dataclasses.replace(raw, scan=None), cal_opt)
-        delay_s = _median_latency(cal)
-        notes += [n for n in cal.notes() if not n.startswith("no scans given")]     # replay leaves scans out
-    except UserError as err:
-        notes += list(data.warnings) + tb_notes
-        if execution is None:
-            notes.append(f"no calibrated replay: the log could not be calibrated ({err.message})")
-            return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes), None)
-        from .delay import estimate_delay
-        axes = [j for j in range(3) if np.ptp(data.cmd.u[:, j]) > 1e-9] or [0]
-        delay_s = estimate_delay(data.cmd.t, data.cmd.u, data.odom.t, data.odom.twist, axes, opt=cal_opt.delay).xcorr_s
-        notes.append(f"the log could not be calibrated ({err.message}); only its actuation delay was measured")
-    sim_log = dataclasses.replace(data, scan=None, warnings=[],
-                                  odom=OdomSeries("replay", nominal.t, nominal.t, nominal.pose, nominal.twist))
+    return data, timing, tb_notes, notes
+
+
+def cut(data: LogData, t_end: float | None) -> LogData:
+    """``data`` (no scans) up to log time ``t_end`` (None: all of it): the part a held-out replay calibrates on."""
+    if t_end is None:
+        return dataclasses.replace(data, scan=None)
+    c, o = data.cmd, data.odom
+    kc, ko = c.t < t_end, o.t < t_end
+    return dataclasses.replace(data, scan=None, cmd=dataclasses.replace(c, t=c.t[kc], u=c.u[kc]),
+                               odom=dataclasses.replace(o, t=o.t[ko], stamp=o.stamp[ko], pose=o.pose[ko],
+                                                        twist=o.twist[ko]))
+
+
+def _head(run: ReplayRun, t_end: float | None) -> ReplayRun:
+    if t_end is None:
+        return run
+    k = run.t < t_end
+    return dataclasses.replace(run, t=run.t[k], pose=run.pose[k], twist=run.twist[k])
+
+
+def command_profile(data: LogData, cal, execution, delay_s: float, nominal: ReplayRun, scene, period_s,
+                    window_s: float, cal_opt: CalibrationOptions, t_split: float | None = None):
+    """The calibrated robot profile (module docstring: A, d, the dead time and the limits mapped onto the
+    model's own response, then the latency's correction step), measured on the log up to ``t_split``; returns
+    (profile, its replay of the whole log scored from ``t_split``, notes)."""
+    notes = []
+    sim_log = cut(dataclasses.replace(data, warnings=[], odom=OdomSeries("replay", nominal.t, nominal.t,
+                                                                         nominal.pose, nominal.twist)), t_split)
     try:
         cal0 = calibrate_series(sim_log, cal_opt)
     except UserError as err:           # the model's own response could not be measured: take it as ideal
@@ -535,25 +550,74 @@ def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOp
     else:
         A0, d0, L0, own_accel = np.eye(3), np.zeros(3), 0.0, None
     prof = model_profile(A, d, delay_s, A0, d0, L0, v_max, lever, accel, own_accel)
-    first = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
+    kw = dict(scene=scene, period_s=period_s, t_from=t_split)
+    first = run_profile("calibrated", data, prof, window_s, **kw)
     # one correction step: the lag that best aligns the replayed twist with the logged one (correlation of their
     # changes; both are responses to the same commands, so their shapes match), added to the latency
     ident = cal.fit.identified if cal is not None else np.ones(3, bool)
-    shift = response_shift(first, data.odom, ident)
+    shift = response_shift(_head(first, t_split), cut(data, t_split).odom, ident)
     if abs(shift) > 0.002:
         prof = dataclasses.replace(prof, latency_s=max(0.0, prof.latency_s + shift))
-        runs["calibrated"] = run_profile("calibrated", data, prof, opt.window_s, scene=scene, period_s=P)
-    else:
-        runs["calibrated"] = first
+        return prof, run_profile("calibrated", data, prof, window_s, **kw), notes
+    return prof, first, notes
+
+
+def _log_model(raw: LogData, data: LogData, cal_opt: CalibrationOptions, execution, t_split, notes):
+    """The log's own model (calibrated up to ``t_split``; with a given profile only its dead time is needed, so a
+    log too weak to calibrate still replays): (calibration or None, dead time [s]); None, None: no calibrated
+    replay."""
+    try:
+        cal = calibrate_series(cut(raw, t_split), cal_opt)
+        notes += [n for n in cal.notes() if not n.startswith("no scans given")]     # replay leaves scans out
+        return cal, _median_latency(cal)
+    except UserError as err:
+        notes += list(data.warnings)
+        if execution is None:
+            notes.append(f"no calibrated replay: the log could not be calibrated ({err.message})")
+            return None, None
+        from .delay import estimate_delay
+        axes = [j for j in range(3) if np.ptp(data.cmd.u[:, j]) > 1e-9] or [0]
+        delay_s = estimate_delay(data.cmd.t, data.cmd.u, data.odom.t, data.odom.twist, axes, opt=cal_opt.delay).xcorr_s
+        notes.append(f"the log could not be calibrated ({err.message}); only its actuation delay was measured")
+        return None, delay_s
+
+
+def replay(data: LogData, execution: ExecutionModel | None = None, opt: ReplayOptions = ReplayOptions(),
+           video: str | Path | None = None, cal_opt: CalibrationOptions = CalibrationOptions(),
+           robot_dir: str | Path | None = None) -> ReplayResult:
+    """Replay with the nominal and the calibrated (with opt.fit, the fitted; with opt.model or ``robot_dir``, the
+    model-fitted) profiles; optional video. With opt.holdout the calibrations see the first part of the log only
+    and every run is scored on the rest."""
+    raw = data
+    data, timing, tb_notes, notes = _checked(data, cal_opt)
+    t0 = float(data.cmd.t[0])
+    t_split = None if opt.holdout == 0 else t0 + (1 - opt.holdout) * float(data.odom.t[-1] - t0)
+    scene = scene_for(data.odom.pose[:, :2])
+    P = timing.period_s
+    runs = {"nominal": run_profile("nominal", data, RobotProfile(), opt.window_s, scene=scene, period_s=P,
+                                   t_from=t_split)}
+    cal, delay_s = _log_model(raw, data, cal_opt, execution, t_split, notes)
+    if cal is None and delay_s is None:
+        return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes + tb_notes), None, t_split)
+    if cal is None:
+        notes += tb_notes
+    prof, runs["calibrated"], more = command_profile(data, cal, execution, delay_s, runs["nominal"], scene, P,
+                                                     opt.window_s, cal_opt, t_split)
+    notes += more
     if opt.fit:
         runs["fitted"] = fit_profile(data, prof, opt, scene, P)
+    fit = None
+    if opt.model or robot_dir is not None:
+        from .model_fit import model_run
+        runs["model"], fit, more = model_run(raw, data, prof, opt, P, t_split, robot_dir)
+        notes += more
     identified = cal.fit.identified if cal is not None else np.array(
         execution.identified if execution is not None else (True, True, True))
     notes = compare(runs, identified, opt.window_s, cal) + notes      # the verdict first: what a person reads
     if video is not None:
-        best = runs.get("fitted", runs["calibrated"])
+        best = runs.get("model", runs.get("fitted", runs["calibrated"]))
         write_video(data, best, runs["nominal"], video, opt, scene)
-    return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes), identified)
+    return ReplayResult(str(data.path), opt.window_s, runs, _dedup(notes), identified, t_split, fit)
 
 
 def _dedup(notes: list[str]) -> list[str]:
