@@ -815,10 +815,31 @@ def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: Per
     """The at most wall_max_points candidates nearest to the robot, within wall_range_m, nearest first."""
     if len(candidates) == 0 or params.wall_max_points == 0:
         return np.zeros((0, 2))
-    d = np.linalg.norm(candidates - robot_xy, axis=1)
-    order = np.argsort(d, kind="stable")
-    order = order[d[order] <= params.wall_range_m][: params.wall_max_points]
-    return candidates[order]
+    candidates = np.ascontiguousarray(candidates, dtype=float)
+    sel = np.empty(len(candidates), np.int64)
+    k = _nearest_within(candidates, float(robot_xy[0]), float(robot_xy[1]), float(params.wall_range_m),
+                        int(params.wall_max_points), sel)
+    return candidates[sel[:k]]
+
+
+@kernel
+def _nearest_within(points, rx, ry, reach, most, out):
+    """:func:`select_wall_points`' choice into ``out`` (returns how many): the points within ``reach`` of (rx, ry),
+    nearest first (a stable sort: ties in the given order), at most ``most``."""
+    n = points.shape[0]
+    d = np.empty(n)
+    for i in range(n):
+        dx, dy = points[i, 0] - rx, points[i, 1] - ry
+        d[i] = math.sqrt(dx * dx + dy * dy)
+    order = np.argsort(d, kind="mergesort")
+    k = 0
+    for i in order:
+        if k >= most:
+            break
+        if d[i] <= reach:
+            out[k] = i
+            k += 1
+    return k
 
 
 def wall_point_covariance(points: np.ndarray, sensor: np.ndarray, angle_increment: float,
@@ -828,13 +849,22 @@ def wall_point_covariance(points: np.ndarray, sensor: np.ndarray, angle_incremen
     resolution at that range, sigma_t = r dphi / sqrt(12) (the return may come from anywhere within one angular step
     dphi = ``angle_increment``: a uniform spread of width r dphi); rotated to the beam's bearing phi:
     Sigma = R(phi) diag(sigma_r^2, sigma_t^2) R(phi)^T."""
-    d = np.asarray(points, float).reshape(-1, 2) - np.asarray(sensor, float)
+    d = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 2) - np.asarray(sensor, float))
     r = np.hypot(d[:, 0], d[:, 1])
-    c, s = d[:, 0] / np.maximum(r, 1e-12), d[:, 1] / np.maximum(r, 1e-12)
-    sr2 = (params.range_sigma_m + params.range_sigma_frac * r) ** 2
-    st2 = (r * angle_increment) ** 2 / 12.0
     cov = np.empty((len(r), 2, 2))
-    cov[:, 0, 0] = c * c * sr2 + s * s * st2
-    cov[:, 1, 1] = s * s * sr2 + c * c * st2
-    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (sr2 - st2)
+    _beam_covariances(d, r, float(angle_increment), float(params.range_sigma_m), float(params.range_sigma_frac), cov)
     return cov
+
+
+@kernel
+def _beam_covariances(d, r, dphi, sigma0, sigma_frac, cov):
+    """:func:`wall_point_covariance` after the ranges r = |d| (numpy's hypot): R(phi) diag(sigma_r^2, sigma_t^2)
+    R(phi)^T per point, in the numpy formulation's order."""
+    for i in range(r.shape[0]):
+        rm = max(r[i], 1e-12)
+        c, s = d[i, 0] / rm, d[i, 1] / rm
+        sr2 = (sigma0 + sigma_frac * r[i]) ** 2
+        st2 = (r[i] * dphi) ** 2 / 12.0
+        cov[i, 0, 0] = c * c * sr2 + s * s * st2
+        cov[i, 1, 1] = s * s * sr2 + c * c * st2
+        cov[i, 0, 1] = cov[i, 1, 0] = c * s * (sr2 - st2)

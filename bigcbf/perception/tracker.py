@@ -272,7 +272,8 @@ class Tracker:
         self.misses[missed] += 1
         alive = np.where(self.confirmed, t - self.last_hit <= pr.coast_s + 1e-9,
                          self.misses <= pr.tentative_max_misses)
-        self._keep(alive)
+        if not alive.all():                       # (all alive: the arrays stay as they are)
+            self._keep(alive)
         # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
         free = np.ones(len(z), bool)
         free[cols] = False

@@ -376,6 +376,8 @@ def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch):
     monkeypatch.setattr(pipeline, "_split_candidates", ref_split_candidates)
     monkeypatch.setattr(Tracker, "surface_owner", ref_surface_owner)
     monkeypatch.setattr(Tracker, "associate", ref_associate)
+    monkeypatch.setattr(pipeline, "select_wall_points", ref_select_wall_points)
+    monkeypatch.setattr(pipeline, "wall_point_covariance", ref_wall_point_covariance)
     from bigcbf.perception import tracker
     monkeypatch.setattr(tracker, "hysteresis_step", ref_hysteresis_step)
     perc = pipeline.Perception()
@@ -433,3 +435,45 @@ def test_hysteresis_step_is_the_numpy_rules():
                 rng.uniform(0, 0.3, N))
         for a, b in zip(hysteresis_step(*args, PR), ref_hysteresis_step(*args, PR)):
             assert np.array_equal(a, b) and a.dtype == b.dtype
+
+
+def ref_select_wall_points(candidates, robot_xy, params):
+    """geometry.select_wall_points as of d27bf46."""
+    if len(candidates) == 0 or params.wall_max_points == 0:
+        return np.zeros((0, 2))
+    d = np.linalg.norm(candidates - robot_xy, axis=1)
+    order = np.argsort(d, kind="stable")
+    order = order[d[order] <= params.wall_range_m][: params.wall_max_points]
+    return candidates[order]
+
+
+def ref_wall_point_covariance(points, sensor, angle_increment, params):
+    """geometry.wall_point_covariance as of d27bf46."""
+    d = np.asarray(points, float).reshape(-1, 2) - np.asarray(sensor, float)
+    r = np.hypot(d[:, 0], d[:, 1])
+    c, s = d[:, 0] / np.maximum(r, 1e-12), d[:, 1] / np.maximum(r, 1e-12)
+    sr2 = (params.range_sigma_m + params.range_sigma_frac * r) ** 2
+    st2 = (r * angle_increment) ** 2 / 12.0
+    cov = np.empty((len(r), 2, 2))
+    cov[:, 0, 0] = c * c * sr2 + s * s * st2
+    cov[:, 1, 1] = s * s * sr2 + c * c * st2
+    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (sr2 - st2)
+    return cov
+
+
+@pytest.mark.parametrize("params", [PR, PerceptionParams(wall_max_points=5, wall_range_m=1.5)])
+def test_wall_point_selection_and_covariances(params):
+    rng = np.random.default_rng(2)
+    for _ in range(60):
+        n = int(rng.integers(0, 60))
+        pts = rng.uniform(-4, 4, (n, 2))
+        if n > 3:
+            pts[1] = pts[0]                                  # a tie: the stable order decides
+        robot, sensor = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2)
+        a, b = G.select_wall_points(pts, robot, params), ref_select_wall_points(pts, robot, params)
+        assert a.shape == b.shape and np.array_equal(a, b)
+        a, b = G.wall_point_covariance(pts, sensor, 0.0175, params), ref_wall_point_covariance(pts, sensor, 0.0175,
+                                                                                               params)
+        assert np.array_equal(a, b)
+    assert np.array_equal(G.wall_point_covariance(np.zeros((1, 2)), np.zeros(2), 0.0175, PR),
+                          ref_wall_point_covariance(np.zeros((1, 2)), np.zeros(2), 0.0175, PR))
