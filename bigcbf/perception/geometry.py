@@ -441,31 +441,23 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     sensor = sp.sensor
     # nearest points, range noise, algebraic (Kasa) circle fits and their residuals, as fit_circle (compiled)
     near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
-    sigma, r, rms = np.empty(m), np.empty(m), np.empty(m)
-    _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m), float(pr.range_sigma_frac), near,
-               ray, sigma, c, r, rms)
-    behind = np.einsum("ij,ij->i", ray, c - near) > 0
-    fitted = np.isfinite(r) & (pr.radius_min_m <= r) & (r <= pr.radius_max_m) & behind
-    tol = np.where(fitted, sigma, 0.0)
+    sigma, r, rms, tol, fitted = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_)
+    _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m), float(pr.range_sigma_frac),
+               float(pr.radius_min_m), float(pr.radius_max_m), near, ray, sigma, c, r, rms, fitted, tol)
     for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
         rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
         pts = P[starts[j]: starts[j] + n[j]]
         cj, rmsj = fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
         c[j], r[j], rms[j] = cj, rj, rmsj
-    behind = np.einsum("ij,ij->i", ray, c - near) > 0
-    # arc span seen from the centre, as measure_compact (numpy's arctan2 of compiled arguments)
+    # arc span seen from the centre, as measure_compact (numpy's arctan2, arccos, arcsin of compiled arguments)
     ay, ax, A, dents = np.empty(len(P)), np.empty(len(P)), np.empty((6, m)), np.zeros(m)
-    _arc_terms(P, n, c, float(sensor[0]), float(sensor[1]), float(sp.angle_increment), float(pr.range_sigma_m),
-               float(pr.range_sigma_frac), ay, ax, A, dents)
-    ang = np.arctan2(ay, ax)
-    span = np.maximum.reduceat(ang, starts) - np.minimum.reduceat(ang, starts)
-    dc = np.linalg.norm(c - sensor, axis=1)
-    rr = np.where(np.isfinite(r), r, 1.0)
-    sampled = np.minimum(np.arccos(np.minimum(rr / np.maximum(dc, 1e-12), 1.0)),
-                         np.arcsin(np.clip((rr - dc * sp.angle_increment) / rr, 0.0, 1.0)))
-    occluded = np.array([cl.occluded for cl in clusters])
-    need = np.where(occluded, pr.fit_min_arc_rad,
-                    np.maximum(pr.fit_min_arc_rad, pr.fit_span_ratio * 2 * sampled))
+    behind, cos_arg, sin_arg = np.empty(m, np.bool_), np.empty(m), np.empty(m)
+    _arc_terms(P, n, c, near, ray, r, float(sensor[0]), float(sensor[1]), float(sp.angle_increment),
+               float(pr.range_sigma_m), float(pr.range_sigma_frac), ay, ax, A, dents, behind, cos_arg, sin_arg)
+    span, need = np.empty(m), np.empty(m)
+    _arc_need(np.arctan2(ay, ax), n, np.arccos(cos_arg), np.arcsin(sin_arg),
+              np.array([cl.occluded for cl in clusters], np.bool_), float(pr.fit_min_arc_rad),
+              float(pr.fit_span_ratio), span, need)
     a11, a12, a22, a13, a23, a33 = A
     out = []
     for j in range(m):
@@ -530,11 +522,13 @@ def _segsum(a, lo, n):
 
 
 @kernel
-def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac, near, ray, sigma, c, r, rms):
+def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, near, ray, sigma, c, r, rms, fitted, tol):
     """The first block of :func:`measure_clusters` over clusters of n[c] points of P: each one's nearest point and
     the unit ray to it, the range-noise std at its mean range, and its algebraic circle fit (centre, radius, RMS
     residual; inf radius and rms for (near-)collinear points), in the numpy formulation's order (sums as
-    ``np.add.reduceat``), into the output arrays (m, 2) near, ray, c and (m,) sigma, r, rms."""
+    ``np.add.reduceat``), into the output arrays (m, 2) near, ray, c and (m,) sigma, r, rms; ``fitted``: the fit
+    is usable as it is (a finite radius within [r_min, r_max], its centre behind the nearest point), ``tol``
+    sigma where fitted, else 0."""
     m, N = n.shape[0], P.shape[0]
     dist, t0, t1, t2, t3, t4 = np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
     start = 0
@@ -571,15 +565,20 @@ def _kasa_fits(P, n, sx, sy, sigma0, sigma_frac, near, ray, sigma, c, r, rms):
             res = math.sqrt(((P[i, 0] - mx) - uc) ** 2 + ((P[i, 1] - my) - vc) ** 2) - rg
             t0[i] = res * res
         rms[j] = math.sqrt(_segsum(t0, start, k) / k) if good else np.inf
+        behind = ray[j, 0] * (c[j, 0] - near[j, 0]) + ray[j, 1] * (c[j, 1] - near[j, 1]) > 0
+        fitted[j] = math.isfinite(r[j]) and r_min <= r[j] and r[j] <= r_max and behind
+        tol[j] = sigma[j] if fitted[j] else 0.0
         start = end
 
 
 @kernel
-def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents):
+def _arc_terms(P, n, c, near, ray, r, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents, behind, cos_arg, sin_arg):
     """The second block of :func:`measure_clusters`: per point the arguments (y, x) of the angle between the point
     and the cluster's mean direction seen from its centre c (for numpy's arctan2), per cluster the entries a11, a12,
     a22, a13, a23, a33 (6, m) of J^T W J for its circle covariance (``point_variances`` weights, outward normals),
-    and the dents of :func:`concavity` (k = 2; ``dents`` starts at 0); numpy's order throughout."""
+    and the dents of :func:`concavity` (k = 2; ``dents`` starts at 0); per cluster also whether its centre lies
+    behind its nearest point, and the arguments of the arccos and arcsin of the arc a circle of its radius shows
+    the sensor at its distance (``sampled`` in :func:`measure_clusters`); numpy's order throughout."""
     m, N = n.shape[0], P.shape[0]
     t = np.empty((6, N))
     g = np.empty(N, np.int64)
@@ -607,6 +606,12 @@ def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents):
             t[3, i], t[4, i], t[5, i] = wt * nx, wt * ny, wt
         for q in range(6):
             A[q, j] = _segsum(t[q], start, k)
+        behind[j] = ray[j, 0] * (c[j, 0] - near[j, 0]) + ray[j, 1] * (c[j, 1] - near[j, 1]) > 0
+        ex, ey = c[j, 0] - sx, c[j, 1] - sy
+        dc = math.sqrt(ex * ex + ey * ey)
+        rr = r[j] if math.isfinite(r[j]) else 1.0
+        cos_arg[j] = min(rr / max(dc, 1e-12), 1.0)
+        sin_arg[j] = min(max((rr - dc * dphi) / rr, 0.0), 1.0)
         start = end
     for i in range(N - 4):
         if g[i] != g[i + 4]:
@@ -620,6 +625,22 @@ def _arc_terms(P, n, c, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents):
         cur = dents[g[i]]
         if not (cur >= val or cur != cur):
             dents[g[i]] = val
+
+
+@kernel
+def _arc_need(ang, n, acos, asin, occluded, min_arc, span_ratio, span, need):
+    """Per cluster (n[c] points): the span of its points' angles ``ang`` and the span an arc needs to count as
+    one (``fit_min_arc_rad`` when partly hidden, else at least ``fit_span_ratio`` times twice the arc the sensor
+    can sample, min(acos, asin)), into span and need."""
+    start = 0
+    for j in range(n.shape[0]):
+        lo, hi = ang[start], ang[start]
+        for i in range(start + 1, start + n[j]):
+            lo, hi = min(lo, ang[i]), max(hi, ang[i])
+        span[j] = hi - lo
+        sampled = min(acos[j], asin[j])
+        need[j] = min_arc if occluded[j] else max(min_arc, span_ratio * 2 * sampled)
+        start += n[j]
 
 
 @kernel
