@@ -24,6 +24,7 @@ BENCHES = [
     "bigcbf.episode_perf:bench",
     "twin.perf:bench",
     "bigcbf.bench.perf:bench",
+    "bigcbf.ros2.perf:bench",
 ]
 
 #: The figures ``by_method`` compares, in step ratios (module docstring).

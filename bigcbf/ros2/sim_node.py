@@ -105,6 +105,8 @@ class TwinNode:
         self.w = TopicWriter(node)
         self._cmd: tuple[np.ndarray, float, int | None] | None = None    # (u, wall time, stamp ns or None)
         self.ignored = 0                                                   # lock-step: commands of no pending tick
+        #: when a list: (t, odometry state, the scan published at this tick or None) per tick (bigcbf.ros2.perf)
+        self.sent: list | None = None
         node.subscribe(cmd_topic, msgdefs.TWIST, self._on_twist, transport.DEFAULT)
         node.subscribe(cmd_topic, msgdefs.TWIST_STAMPED, self._on_twist_stamped, transport.DEFAULT)
         self._answers: dict[int, np.ndarray] = {}
@@ -156,11 +158,13 @@ class TwinNode:
         pose_cov, twist_cov = self._cov.odom(t, state)
         odom = wire.from_dict(msgdefs.ODOMETRY, convert.odometry_msg(t, state, "odom", "base_link", pose_cov,
                                                                      twist_cov))
-        scan = ep.last_scan
+        scan, new_scan = ep.last_scan, None
         if scan is not None and scan.stamp != last_scan_stamp:
-            last_scan_stamp = scan.stamp
+            last_scan_stamp, new_scan = scan.stamp, scan
             w.scan(scan.stamp, scan)       # before the odometry: one participant, one socket, in order
         w.write("/odom", msgdefs.ODOMETRY, t, odom)      # right after the scan (built before it)
+        if self.sent is not None:
+            self.sent.append((t, state, new_scan))
         return last_scan_stamp
 
     # --- the loop -----------------------------------------------------------------------------------------------

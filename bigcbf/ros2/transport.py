@@ -98,6 +98,7 @@ class Node:
         self._topics: dict[tuple[str, str], object] = {}
         self._waitset = WaitSet(self.dp)
         self._readers: list[tuple[object, object, object]] = []    # (reader, condition, callback)
+        self.last_wake_cpu = 0.0
 
     def _topic(self, topic: str, msgtype: str):
         from cyclonedds.topic import Topic
@@ -140,6 +141,7 @@ class Node:
         from cyclonedds.internal import InvalidSample
 
         t_in = time.perf_counter()
+        self.last_wake_cpu = time.thread_time()      # this thread's CPU time at the wake (latency in CPU time)
         handled = 0
         for reader, cond, callback in self._readers:
             for msg in reader.take(N=64, condition=cond):
