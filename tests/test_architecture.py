@@ -26,16 +26,18 @@ LAYERS = [
                     "bigcbf.validate", "bigcbf.sanity", "bigcbf.cost", "bigcbf.limits"]),
     ("params", ["bigcbf.params"]),
     ("robot side and log I/O", ["bigcbf.control", "bigcbf.perception", "bigcbf.logio"]),
+    ("ros2 robot side", ["bigcbf.ros2"]),
     ("sim", ["bigcbf.sim", "bigcbf.assets", "bigcbf.robots"]),
     ("scenario", ["bigcbf.scenario", "bigcbf.worlds"]),
     ("episode", ["bigcbf.episode", "bigcbf.config"]),
-    ("on an episode", ["bigcbf.video", "bigcbf.episode_perf"]),
+    ("on an episode", ["bigcbf.video", "bigcbf.episode_perf", "bigcbf.ros2.sim_node"]),
     ("bench and gym_env", ["bigcbf.bench", "bigcbf.gym_env"]),
     ("api", ["bigcbf.api"]),
     ("twin", ["twin"]),
     ("cli", ["bigcbf.cli"]),
 ]
-ROBOT_SIDE = ("bigcbf.control", "bigcbf.perception")
+ROBOT_SIDE = ("bigcbf.control", "bigcbf.perception", "bigcbf.ros2.filter_node", "bigcbf.ros2.stack",
+              "bigcbf.ros2.transport", "bigcbf.ros2.wire", "bigcbf.ros2.cli_common")
 SIM_ONLY = ("mujoco", "dm_control", "cv2")
 MUJOCO = ("mujoco", "dm_control")
 
