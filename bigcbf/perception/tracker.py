@@ -47,7 +47,7 @@ from scipy.optimize import linear_sum_assignment
 from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import Obstacles
-from .classify import hysteresis_step, speed_sigma
+from .classify import _hysteresis, speed_sigma
 from .kalman import kf_predict, kf_update, mahalanobis2
 
 _INFEASIBLE = 1e9
@@ -114,6 +114,41 @@ def _gate(z, radii, R, x, P, r, chi2, gate_min, gate_max, gate_radius, infeasibl
             good = (d2 <= chi2 or dist <= gate_min) and dist <= gate_max and abs(radii[j] - r[i]) <= gate_radius
             ok[i, j] = good
             cost[i, j] = dist if good else infeasible
+
+
+@kernel
+def _apply_hits(rows, cols, x, P, radii, rnd, t, sigma, a, b, confirm_hits, classify_after, v_dynamic,
+                dynamic_sigma, v_static, n_dynamic, n_static, r, roundness, hits, misses, last_hit, confirmed, static,
+                n_dyn, n_stat, Ps, P_hit):
+    """The bookkeeping of :meth:`Tracker.step` for the tracks ``rows`` updated by measurements ``cols`` (their
+    updated states x (K, 4) and covariances P (K, 4, 4), the speed's std ``sigma``): radius and roundness smoothed
+    (factors a, b), hits, misses, time of the hit, confirmation, the static/dynamic hysteresis
+    (``classify._hysteresis``; a young track keeps its class and zero counters) and the reported covariance at
+    the hit, in place, in the numpy formulation's order."""
+    K = rows.shape[0]
+    st_in, nd_in, ns_in, speed = np.empty(K, np.bool_), np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K)
+    for k in range(K):
+        i, j = rows[k], cols[k]
+        r[i] = (1 - a) * r[i] + a * radii[j]
+        roundness[i] = (1 - b) * roundness[i] + b * rnd[j]
+        hits[i] += 1
+        misses[i] = 0
+        last_hit[i] = t
+        confirmed[i] = confirmed[i] or hits[i] >= confirm_hits
+        st_in[k], nd_in[k], ns_in[k] = static[i], n_dyn[i], n_stat[i]
+        speed[k] = math.sqrt(x[k, 2] * x[k, 2] + x[k, 3] * x[k, 3])
+    st, nd, ns = np.empty(K, np.bool_), np.empty(K, np.int64), np.empty(K, np.int64)
+    _hysteresis(st_in, nd_in, ns_in, speed, sigma, v_dynamic, dynamic_sigma, v_static, n_dynamic, n_static, st, nd,
+                ns)
+    for k in range(K):
+        i = rows[k]
+        young = hits[i] <= classify_after
+        static[i] = st_in[k] if young else st[k]
+        n_dyn[i] = 0 if young else nd[k]
+        n_stat[i] = 0 if young else ns[k]
+        for p in range(2):
+            for q in range(2):
+                P_hit[i, p, q] = Ps[i, p, q] if static[i] else P[k, p, q]
 
 
 class Tracker:
@@ -246,26 +281,17 @@ class Tracker:
             x, P = kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
             self.x[rows], self.P[rows] = x, P
             self._update_static_filter(rows, z[cols], R[cols])
-            a = pr.radius_smoothing
-            self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
-            b = pr.shape_smoothing
-            self.roundness[rows] = (1 - b) * self.roundness[rows] + b * rnd[cols]
             self.surface[rows] = surf[cols]
-            self.hits[rows] += 1
-            self.misses[rows] = 0
-            self.last_hit[rows] = t
-            self.confirmed[rows] |= self.hits[rows] >= pr.confirm_hits
-            v = x[:, 2:]
-            st, nd, ns = hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
-                                         np.linalg.norm(v, axis=1), speed_sigma(v, P[:, 2:, 2:]), pr)
-            # the classification starts once the velocity rests on more than classify_after_hits measurements: a
-            # young track's velocity is the difference of two or three noisy centres (module docstring)
-            young = self.hits[rows] <= pr.classify_after_hits
-            st = np.where(young, self.static[rows], st)
-            nd = np.where(young, 0, nd)
-            ns = np.where(young, 0, ns)
-            self.static[rows], self.n_dyn[rows], self.n_stat[rows] = st, nd, ns
-            self.P_hit[rows] = np.where(st[:, None, None], self.Ps[rows], P[:, :2, :2])
+            # the smoothed radius and shape, the counters, and the classification (hysteresis_step), which starts
+            # once the velocity rests on more than classify_after_hits measurements: a young track's velocity is the
+            # difference of two or three noisy centres (module docstring); compiled (_apply_hits)
+            _apply_hits(rows.astype(np.int64), cols.astype(np.int64), np.ascontiguousarray(x), np.ascontiguousarray(P),
+                        np.ascontiguousarray(radii), np.ascontiguousarray(rnd, dtype=float), float(t),
+                        np.ascontiguousarray(speed_sigma(x[:, 2:], P[:, 2:, 2:])), float(pr.radius_smoothing),
+                        float(pr.shape_smoothing), int(pr.confirm_hits), int(pr.classify_after_hits),
+                        float(pr.v_dynamic_mps), float(pr.dynamic_sigma), float(pr.v_static_mps), int(pr.n_dynamic),
+                        int(pr.n_static), self.r, self.roundness, self.hits, self.misses, self.last_hit,
+                        self.confirmed, self.static, self.n_dyn, self.n_stat, self.Ps, self.P_hit)
             self.sv_hit[rows] = np.sqrt(np.linalg.eigvalsh(P[:, 2:, 2:])[:, -1])
         missed = np.ones(len(self), bool)
         missed[rows] = False

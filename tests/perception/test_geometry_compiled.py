@@ -378,8 +378,7 @@ def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch):
     monkeypatch.setattr(Tracker, "associate", ref_associate)
     monkeypatch.setattr(pipeline, "select_wall_points", ref_select_wall_points)
     monkeypatch.setattr(pipeline, "wall_point_covariance", ref_wall_point_covariance)
-    from bigcbf.perception import tracker
-    monkeypatch.setattr(tracker, "hysteresis_step", ref_hysteresis_step)
+    monkeypatch.setattr(Tracker, "step", ref_step)
     perc = pipeline.Perception()
     want = [perc.update(*f) for f in frames]
     n_tracks = 0
@@ -424,6 +423,78 @@ def ref_hysteresis_step(static, n_dyn, n_stat, speed, sigma, params):
     n_dyn = np.where(to_dyn, 0, n_dyn)
     n_stat = np.where(to_stat, 0, n_stat)
     return static, n_dyn, n_stat
+
+
+def ref_step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray, cov: np.ndarray | None = None,
+         round_: np.ndarray | None = None, surface: list | None = None) -> np.ndarray:
+    """tracker.Tracker.step as of d27bf46 (with the associate of this commit's reference)."""
+    pr = self.params
+    z = np.asarray(z, float).reshape(-1, 2)
+    m = len(z)
+    radii = np.asarray(radii, float).reshape(-1)
+    R = self.measurement_covariance(cov, m)
+    rnd = np.ones(m) if round_ is None else np.asarray(round_, float).reshape(m)
+    surf = np.empty(m, object)
+    for k in range(m):
+        surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
+    self.predict(t)
+    rows, cols = self.associate(z, radii, R)
+    if len(rows):
+        x, P = _kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
+        self.x[rows], self.P[rows] = x, P
+        self._update_static_filter(rows, z[cols], R[cols])
+        a = pr.radius_smoothing
+        self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
+        b = pr.shape_smoothing
+        self.roundness[rows] = (1 - b) * self.roundness[rows] + b * rnd[cols]
+        self.surface[rows] = surf[cols]
+        self.hits[rows] += 1
+        self.misses[rows] = 0
+        self.last_hit[rows] = t
+        self.confirmed[rows] |= self.hits[rows] >= pr.confirm_hits
+        v = x[:, 2:]
+        st, nd, ns = ref_hysteresis_step(self.static[rows], self.n_dyn[rows], self.n_stat[rows],
+                                     np.linalg.norm(v, axis=1), _speed_sigma(v, P[:, 2:, 2:]), pr)
+        # the classification starts once the velocity rests on more than classify_after_hits measurements: a
+        # young track's velocity is the difference of two or three noisy centres (module docstring)
+        young = self.hits[rows] <= pr.classify_after_hits
+        st = np.where(young, self.static[rows], st)
+        nd = np.where(young, 0, nd)
+        ns = np.where(young, 0, ns)
+        self.static[rows], self.n_dyn[rows], self.n_stat[rows] = st, nd, ns
+        self.P_hit[rows] = np.where(st[:, None, None], self.Ps[rows], P[:, :2, :2])
+        self.sv_hit[rows] = np.sqrt(np.linalg.eigvalsh(P[:, 2:, 2:])[:, -1])
+    missed = np.ones(len(self), bool)
+    missed[rows] = False
+    self.misses[missed] += 1
+    alive = np.where(self.confirmed, t - self.last_hit <= pr.coast_s + 1e-9,
+                     self.misses <= pr.tentative_max_misses)
+    if not alive.all():                       # (all alive: the arrays stay as they are)
+        self._keep(alive)
+    # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
+    free = np.ones(len(z), bool)
+    free[cols] = False
+    rejected = np.zeros(len(z), bool)
+    if free.any() and len(self):
+        d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
+        rejected |= free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
+        free &= ~rejected
+    if free.any():
+        self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
+    if len(self) > pr.max_candidates:
+        keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
+        self._keep(np.sort(keep))
+    return np.flatnonzero(rejected)
+
+
+def _kf_update(*args):
+    from bigcbf.perception.kalman import kf_update
+    return kf_update(*args)
+
+
+def _speed_sigma(*args):
+    from bigcbf.perception.classify import speed_sigma
+    return speed_sigma(*args)
 
 
 def test_hysteresis_step_is_the_numpy_rules():
