@@ -39,6 +39,8 @@ from . import transport
 from .stack import FILTER_ONLY, SafetyStack
 
 BOOL, FLOAT64 = "std_msgs/msg/Bool", "std_msgs/msg/Float64"
+#: how long the first scans wait for the laser mount on /tf_static before the default mount is used [s]
+MOUNT_WAIT_S = 1.0
 
 
 @dataclass
@@ -119,6 +121,7 @@ class FilterNode:
         #                                                        command
         self._stack_ms_pending = 0.0
         self._status = None
+        self._mount_note = False
         node.subscribe("/tf_static", msgdefs.TF_MESSAGE, self._on_tf_static, transport.LATCHED)
         node.subscribe(opts.goal_topic, msgdefs.POSE_STAMPED, self._on_goal, transport.LATCHED)
         node.subscribe(opts.scan_topic, msgdefs.LASER_SCAN, self._on_scan, sensor)   # before /odom: order kept
@@ -161,14 +164,15 @@ class FilterNode:
         """Scans whose instant the odometry has reached, each with the pose of its instant (the latest odometry
         at or before its stamp: the episode's order)."""
         if self.stack.perception is None and self._pending:
-            frame = self._pending[0][0].frame_id
+            frame, first_in = self._pending[0][0].frame_id, self._pending[0][1][0]
             if frame in self._mounts:
                 self.stack.set_mount(*self._mounts[frame])
-            elif not self.opts.lockstep or len(self._pending) > 3:
-                print(f"note: no /tf_static transform base_link -> {frame}; the laser mount is the perception "
-                      "parameters' (X3 default)", file=sys.stderr)
-            else:
-                return
+            elif time.perf_counter() - first_in < MOUNT_WAIT_S:
+                return                      # /tf_static (latched) may come just after the first scans
+            elif not self._mount_note:
+                self._mount_note = True
+                print(f"note: no /tf_static transform base_link -> {frame} within {MOUNT_WAIT_S:g} s; the laser "
+                      "mount is the perception parameters' (X3 default)", file=sys.stderr)
         while self._pending and self._odom and self._odom[-1][0] >= self._pending[0][0].stamp - 1e-9:
             scan, t_in = self._pending.pop(0)
             pose = next((s for t, s in reversed(self._odom) if t <= scan.stamp + 1e-9), self._odom[0][1])

@@ -48,6 +48,8 @@ def _feed(domain_id, proc, seconds=40.0):
     n = transport.Node("robot", domain_id, loopback=True)
     scan = n.publisher("/scan", msgdefs.LASER_SCAN, transport.DEFAULT)
     odom = n.publisher("/odom", msgdefs.ODOMETRY, transport.DEFAULT)
+    tf = n.publisher("/tf_static", msgdefs.TF_MESSAGE, transport.LATCHED)       # the laser mount, as a robot has
+    tf(convert.static_tf_msg(0.0, [("base_link", "laser", (0.05, 0.0, 0.2), 0.0)]))
     cmds = []
     n.subscribe("/cmd_vel", msgdefs.TWIST, lambda m, t: cmds.append(convert.twist_u(m)), transport.DEFAULT)
     import math
@@ -57,7 +59,7 @@ def _feed(domain_id, proc, seconds=40.0):
     from bigcbf.types import LaserScan
     ranges = np.full(360, np.inf, np.float32)
     t, end = 0.0, time.monotonic() + seconds
-    while not cmds and time.monotonic() < end and proc.poll() is None:
+    while not (cmds and cmds[-1][0] > 0.05) and time.monotonic() < end and proc.poll() is None:
         scan(convert.laser_scan_msg(LaserScan(stamp=t, angle_min=-math.pi, angle_increment=2 * math.pi / 360,
                                               range_min=0.05, range_max=12.0, ranges=ranges)))
         odom(convert.odometry_msg(t, RobotState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
