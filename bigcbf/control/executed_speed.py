@@ -15,7 +15,10 @@ speed: a slow GOAL's 1.5 s rollout ends before the wall it is heading for and st
 0.35 of v_b^max; fastest first) and a horizon of ceil(N / s) steps, so that the rollout covers the same distance,
 v_b^max N dt, as the full-speed one: the look-ahead does not collapse with the speed. The same policies, prediction,
 shared barrier and acceptance test (only the speed limits and N differ). The first scale at which it is accepted
-replaces its row: h_min, acceptance and the cost ``eq:behavior_cost`` (14), whose summed terms (W of
+replaces its row, if it stays outside every inflated radius (min h >= 0: the filter's own condition; the
+tolerance eps_h of ``eq:behavior_acceptance`` (22) is not granted to a re-judged candidate, whose slow rollout
+covers the same distance: accepted only within the tolerance, it crept into a pocket where the filter held it,
+clutter_00003 of the dev split, stopped 14.8 s): h_min, acceptance and the cost ``eq:behavior_cost`` (14), whose summed terms (W of
 ``eq:analytic_workload`` (24), P, S of ``eq:behavior_terms`` (13)) are rescaled by N / ceil(N / s) to the
 standard horizon's time (a slow candidate earns the progress it makes in N dt, not in its longer horizon; F is a
 fraction). Selected, the mode runs with the scaled speed limit until the next selection
@@ -74,7 +77,7 @@ def judge_at_executed_speed(img: Imagination, state: RobotState, obstacles: Obst
         slow = imagine(state, obstacles, goal, slow_p, modes=modes, shared=shared, current=current, rules=rules)
         left = []
         for k, b in enumerate(todo):
-            if slow.accepted[k]:
+            if slow.accepted[k] and slow.h_min[k] >= 0.0:      # the filter's own test, without eps_h (docstring)
                 _replace_row(out, b, slow, k, params)
                 scale[b] = s
             else:
