@@ -64,6 +64,7 @@ def run(args) -> int:
     from ..ros2.wire import check_topic
 
     import_cyclonedds()
+    domain = domain_id(args)                 # every option checked before the warm-up
     for opt in ("scan_topic", "odom_topic", "cmd_topic", "cmd_in_topic", "goal_topic"):
         check_topic(getattr(args, opt), "--" + opt.replace("_", "-"))
     from ..params.stack import default_stack_params, load_stack_params
@@ -80,7 +81,7 @@ def run(args) -> int:
                          stamped=args.stamped, lockstep=args.lockstep, markers=args.markers,
                          scan_timeout_s=args.scan_timeout, odom_timeout_s=args.odom_timeout,
                          overrun_ms=args.overrun_ms, idle_exit_s=args.idle_exit)
-    node = Node("bigcbf_filter", domain_id(args), loopback=args.loopback)
+    node = Node("bigcbf_filter", domain, loopback=args.loopback)
     fnode = FilterNode(node, stack, opts)
     print(f"bigcbf filter: {args.method} on DDS domain {node.domain_id}{' (loopback)' if args.loopback else ''}"
           f"{', lock-step' if args.lockstep else ''}; ready (warm-up {warm:.1f} s)", file=sys.stderr, flush=True)

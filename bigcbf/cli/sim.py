@@ -40,12 +40,13 @@ def run(args) -> int:
     from .run import load_run_scenario, stderr_note
 
     import_cyclonedds()
+    domain = domain_id(args)
     scenario = load_run_scenario(args.scenario, args.seed, args.robot_profile)
     config = load_config(args.config, None, notes=stderr_note)
     from ..ros2.sim_node import TwinEpisode, TwinNode
 
     ep = TwinEpisode.from_config(scenario, None, args.seed, config, time_limit_s=args.time_limit)
-    node = Node("bigcbf_sim", domain_id(args), loopback=args.loopback)
+    node = Node("bigcbf_sim", domain, loopback=args.loopback)
     twin = TwinNode(ep, node, lockstep=args.lockstep, speed=args.speed, cmd_timeout_s=args.cmd_timeout,
                     answer_timeout_s=args.wait)
     mode = "lock-step" if args.lockstep else f"{args.speed:g} x real time"

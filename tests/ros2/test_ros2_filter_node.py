@@ -65,7 +65,8 @@ def setup(domain_id):
     stack = SafetyStack("big-cbf", default_stack_params())
     stack.warm_up()
     node = FilterNode(transport.Node("filter", domain_id, loopback=True), stack,
-                      FilterOptions(goal=(3.0, 0.0), odom_timeout_s=0.3, scan_timeout_s=0.5, overrun_ms=1000))
+                      FilterOptions(goal=(3.0, 0.0), odom_timeout_s=0.3, scan_timeout_s=0.5, overrun_ms=1000,
+                                    markers=True))
     robot = Robot(domain_id, node)
     yield node, robot
     robot.n.close()
