@@ -259,8 +259,8 @@ class WorldPedestrians:
                                  stops=[p.stop for p in specs], turns=[p.turn for p in specs], seed=seed)
         m = world.model
         self._world = world
-        self._mocap = [m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")]
-                       for p in specs]
+        self._mocap = np.array([m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"ped_{p.name}")]
+                                for p in specs], dtype=np.intp)       # (an index array, built once)
         self._t, self._next = 0.0, 0.0
         self.move(world)
         world.add_pre_step(self.move)
@@ -268,7 +268,7 @@ class WorldPedestrians:
     def move(self, world) -> None:
         """Before each physics block: the social-force step when due, and the mocap bodies moved to where the
         pedestrians are now."""
-        if not self._mocap:
+        if not len(self._mocap):
             return
         t = world.t
         if t >= self._next - 1e-9:
@@ -278,7 +278,7 @@ class WorldPedestrians:
 
     def positions(self) -> np.ndarray:
         """(K, 2) the pedestrians' centres in the physics now (their mocap bodies) [m]."""
-        return self._world.data.mocap_pos[self._mocap, :2] if self._mocap else np.zeros((0, 2))
+        return self._world.data.mocap_pos[self._mocap, :2] if len(self._mocap) else np.zeros((0, 2))
 
     @property
     def velocities(self) -> np.ndarray:
