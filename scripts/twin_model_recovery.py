@@ -61,7 +61,10 @@ def one_case(i: int, rng, seed: int, duration: float, tmp: Path, opt: ModelFitOp
     return row
 
 
-def run(n: int, seed: int, duration: float, opt: ModelFitOptions = ModelFitOptions()) -> list[dict]:
+def run(n: int, seed: int, duration: float, opt: ModelFitOptions = ModelFitOptions(),
+        json_path: Path | None = None) -> list[dict]:
+    """The n cases (a row each, printed as it comes; with ``json_path`` the rows so far and their summary are
+    written after each case, so a run cut short still leaves its numbers)."""
     rng = np.random.default_rng(seed)
     rows = []
     with tempfile.TemporaryDirectory(prefix="bigcbf-model-recovery-") as tmp:
@@ -75,6 +78,8 @@ def run(n: int, seed: int, duration: float, opt: ModelFitOptions = ModelFitOptio
                                                               if p["identified"] else "n.i."))
             print(f"{i:3d} latency {row['latency_true_s']:.3f}->{row['latency_front_s']:.3f} s  " + "  ".join(cells)
                   + f"  {row['cpu_s_per_log_minute']:.0f} s CPU/log-min", flush=True)
+            if json_path is not None:
+                json_path.write_text(json.dumps({"rows": rows, "summary": summary(rows)}, indent=1))
     return rows
 
 
@@ -110,12 +115,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    rows = run(args.n, args.seed, args.duration)
-    s = summary(rows)
-    for k, v in s.items():
+    rows = run(args.n, args.seed, args.duration, json_path=args.json)
+    for k, v in summary(rows).items():
         print(f"{k:16s} {v}")
-    if args.json is not None:
-        args.json.write_text(json.dumps({"rows": rows, "summary": s}, indent=1))
 
 
 if __name__ == "__main__":

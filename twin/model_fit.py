@@ -52,6 +52,7 @@ PARAMS = (("wheel_kv", "N m s/rad", "wheel velocity actuator gain"),
           ("wheel_damping", "N m s/rad", "wheel joint damping"),
           ("floor_friction", "-", "roller/floor sliding friction"),
           ("base_mass", "kg", "chassis mass"))
+PARAMS_NAMES = tuple(n for n, _, _ in PARAMS)
 CHANNELS = ("vx", "vy", "wz", "imu wz")
 #: the smallest per-channel scale of the residual [m/s, m/s, rad/s, rad/s]: an axis the log barely drives (a
 #: differential robot's vy) must not be blown up to the others' weight

@@ -787,9 +787,10 @@ def write_video(data: LogData, run: ReplayRun, nominal: ReplayRun, path: str | P
 
 def replay_log(path: str | Path, profile: str | Path | ExecutionModel | None = None, *,
                opt: ReplayOptions = ReplayOptions(), video: str | Path | None = None, cmd_topic: str | None = None,
-               odom_topic: str | None = None) -> ReplayResult:
+               odom_topic: str | None = None, robot_dir: str | Path | None = None) -> ReplayResult:
     """Read a log and :func:`replay` it (``bigcbf replay LOG`` in Python). ``profile``: a calibrated uncertainty
-    profile TOML (its ``[uncertainty.execution]`` A, d) or an ExecutionModel; None: calibrate the log itself."""
+    profile TOML (its ``[uncertainty.execution]`` A, d) or an ExecutionModel; None: calibrate the log itself.
+    ``robot_dir``: a fitted robot folder replayed as the "model" run (``bigcbf calibrate --model``)."""
     from bigcbf.params.stack import load_stack_params
     from bigcbf.params.toml_io import load_toml
 
@@ -805,4 +806,4 @@ def replay_log(path: str | Path, profile: str | Path | ExecutionModel | None = N
                             file=str(profile), field="uncertainty.execution")
         execution = load_stack_params(profile).uncertainty.execution
     data = read_log(path, cmd_topic, odom_topic, use_scan=False)
-    return replay(data, execution, opt, video=video)
+    return replay(data, execution, opt, video=video, robot_dir=robot_dir)

@@ -29,6 +29,13 @@ def add_arguments(p):
                         "the last command is held)")
     p.add_argument("--coverage", type=float_in(0.5, 1.0, "a coverage"), default=0.95,
                    help="stated coverage of the residual bound (0.95)")
+    p.add_argument("--model", type=path_arg, default=None, metavar="DIR",
+                   help="also fit the MuJoCo model behind the command layer (wheel gain and damping, floor friction, "
+                        "chassis mass; mujoco.sysid, about a minute of CPU per minute of log) and write it as the "
+                        "robot folder DIR (bigcbf replay LOG --robot DIR; [robot] model = \"DIR\" in a scenario)")
+    p.add_argument("--robot", default="rosmaster_x3", metavar="NAME|DIR",
+                   help="with --model: the robot whose model is fitted (a registered robot or a robot folder; "
+                        "default rosmaster_x3)")
 
 
 def run(args) -> int:
@@ -46,6 +53,13 @@ def run(args) -> int:
         check_output_file(args.out, "profile")
     if args.report is not None:
         check_output_dir(args.report, "report folder")
+    if args.model is not None:
+        from ..robots import folder
+        folder(args.robot)                   # an unknown robot: one line naming the known ones
+        check_distinct({"log": args.log}, {"--model": args.model, "--out": args.out, "--report": args.report})
+        check_output_dir(args.model, "model folder")
+    elif args.robot != "rosmaster_x3":
+        raise UserError("--robot names the model --model fits: give --model DIR too")
     opt = CalibrationOptions()
     opt = replace(opt, residual=replace(opt.residual, coverage=args.coverage),
                   delay=replace(opt.delay, scan_clock=args.scan_clock), max_command_age_s=args.cmd_timeout)
@@ -57,12 +71,18 @@ def run(args) -> int:
     if args.report is not None:
         from twin.report import write_report
         written += write_report(cal, args.report, data.cmd.t, data.cmd.u)
+    fit = None
+    if args.model is not None:
+        from twin.model_fit import fit_log, write_robot_folder
+        fit = fit_log(data, args.robot, cal_opt=opt)
+        written += write_robot_folder(fit, args.model)
     if args.json:
         out = cal.to_json()
+        out["model"] = None if fit is None else fit.to_json()
         out["written"] = [str(p) for p in written]
         print(strict_json(out))
     else:
-        print("\n".join(summary_lines(cal)))
+        print("\n".join(summary_lines(cal) + ([] if fit is None else fit.summary_lines())))
         for p in written:
             print(f"wrote {p}")
     return 0

@@ -9,7 +9,8 @@ from .argtypes import float_in, path_arg
 #: that they agree: the CLI does not import the twin just to build its parser)
 MIN_WINDOW_S, MAX_WINDOW_S = 0.1, 3600.0
 
-HELP = "replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted); errors, video"
+HELP = ("replay a log's commands through the MuJoCo model (nominal vs calibrated, optionally fitted or model-fitted on a "
+        "held-out split); errors, video")
 
 
 def add_arguments(p):
@@ -25,6 +26,14 @@ def add_arguments(p):
                    metavar="S", help=f"pose-drift window in seconds (5; in [{MIN_WINDOW_S:g}, {MAX_WINDOW_S:g}))")
     p.add_argument("--cmd-topic", default=None, help="command topic (default: found by type)")
     p.add_argument("--odom-topic", default=None, help="odometry topic (default: found by type)")
+    p.add_argument("--model", action="store_true",
+                   help="also fit the MuJoCo model behind the command layer (mujoco.sysid, as bigcbf calibrate "
+                        "--model) on the first part of the log and score every model on the rest (--holdout)")
+    p.add_argument("--robot", type=path_arg, default=None, metavar="DIR",
+                   help="also replay a fitted robot folder (bigcbf calibrate --model DIR) behind its command layer")
+    p.add_argument("--holdout", type=float_in(0.0, 0.9, "a fraction of the log"), default=None, metavar="F",
+                   help="score on the last fraction F of the log and calibrate (and fit) on the rest (default 0.4 "
+                        "with --model, else 0: the whole log)")
     p.add_argument("--save-robot-profile", type=path_arg, default=None, metavar="PATH.toml",
                    help="write the calibrated (or fitted) simulator robot profile (for bigcbf record calibration)")
 
@@ -41,8 +50,13 @@ def run(args) -> int:
             check_output_file(path, what)
     from twin.replay import ReplayOptions, replay_log
 
-    res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit), video=args.video,
-                     cmd_topic=args.cmd_topic, odom_topic=args.odom_topic)
+    if args.robot is not None:
+        from ..robots import folder
+        folder(str(args.robot))              # not a robot folder: one line saying what one holds
+    holdout = args.holdout if args.holdout is not None else (0.4 if args.model else 0.0)
+    res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit, model=args.model,
+                                                               holdout=holdout),
+                     video=args.video, cmd_topic=args.cmd_topic, odom_topic=args.odom_topic, robot_dir=args.robot)
     best = res.runs.get("fitted", res.runs.get("calibrated"))
     if args.save_robot_profile is not None:
         if best is None:
@@ -54,10 +68,13 @@ def run(args) -> int:
         print(strict_json(res.to_json()))
         return 0
     print(f"replay of {args.log}: velocity RMSE (vx m/s, vy m/s, wz rad/s) and pose drift over {args.window:g} s "
-          f"windows, simulated odometry vs logged")
+          f"windows, simulated odometry vs logged"
+          + ("" if res.scored_from is None else
+             f"; scored on the held-out last {holdout:.0%} (from {res.scored_from - res.runs['nominal'].t[0]:.1f} s), "
+             "calibrated on the rest"))
     print(f"{'model':<11} {'rmse vx':>8} {'rmse vy':>8} {'rmse wz':>8} {'drift mean':>11} {'drift max':>10} "
           f"{'yaw mean':>9} {'final err':>10}")
-    for name in ("nominal", "calibrated", "fitted"):
+    for name in ("nominal", "calibrated", "fitted", "model"):
         r = res.runs.get(name)
         if r is None:
             if name == "calibrated":
@@ -81,6 +98,8 @@ def run(args) -> int:
               f"{', '.join(f'{p.gain[j][j]:.3f}' for j in range(3))}, bias {', '.join(f'{x:+.3f}' for x in p.bias)}"
               + (f", floor friction {p.floor_friction:.3f}" if p.floor_friction is not None else "")
               + (", " + ", ".join(lim) if lim else ""))
+    if res.model_fit is not None:
+        print("\n".join(res.model_fit.summary_lines()))
     for n in res.notes:
         print(f"note: {n}")
     for path in (args.video, args.save_robot_profile):
