@@ -32,8 +32,8 @@ current one until it ends.
 (PASS-L/SIDE-L or PASS-R/SIDE-R) selected during an encounter commits it to that side; while the current
 encounter is committed, the opposite side's modes are not candidates (GOAL and YIELD remain). The commitment is
 released when every candidate on the committed side fails the safety test of ``eq:behavior_acceptance`` (22) at
-``commit_release_selections`` consecutive selections (K = 3, 1.5 s at T_B = 0.5 s), and at the end of the
-encounter, and, as COMPASS (kjungmo/compass) lets a challenger class win, when the evidence for the other side
+``commit_release_selections`` consecutive selections (K = 3, 1.5 s at T_B = 0.5 s; a selection at which the side
+passes again takes one back, so alternating rejections release it too), and at the end of the encounter, and, as COMPASS (kjungmo/compass) lets a challenger class win, when the evidence for the other side
 (:func:`accumulate_evidence`, a leaky sum of its cost advantage) reaches ``commit_evidence_js``: a side that is
 safe but leads nowhere (a wall beside a doorway) is given up when the other side stays clearly better for a while,
 not for a one-selection advantage (the flips measured in issue 25 were one about every second).
@@ -87,7 +87,7 @@ def accumulate_evidence(evidence: float, advantage: float, params: StackParams) 
     walker in a 2 m corridor), so the cap makes the evidence a matter of time: with T_B = 0.5 s, at most 0.5 per
     selection, 0.5, 0.85, 1.10, 1.27, ... (limit 1.67) over consecutive selections; 1.2 takes four in a row (2 s).
     A constant advantage D reaches a threshold E only if min(D - w_sw, D_cap) T_B / (1 - lambda) > E."""
-    e = EVIDENCE_LEAK * evidence + min(advantage - params.w_sw, EVIDENCE_CAP) * params.T_B_s
+    e = EVIDENCE_LEAK * evidence + min(advantage - params.w_sw, EVIDENCE_CAP) * params.T_B_s   # D = inf: the cap
     return float(min(max(e, 0.0), EVIDENCE_MAX))
 
 

@@ -59,10 +59,14 @@ class BehaviorSelector:
     Encounter commitment (a rule of ours, ``PlusRules.encounter_commitment``, off in ``big-cbf``;
     ``bigcbf.control.encounters``): ``select`` is given the current encounter. While it is committed to a side, the
     opposite side's modes are not viable (rules 1-4 choose among the rest: that side, GOAL, YIELD, else the
-    fallback), unless every candidate on the committed side has failed eq:behavior_acceptance (22) at
-    ``commit_release_selections`` consecutive selections, or the evidence for the other side (the leaky sum of its
-    cost advantage beyond w_sw, :func:`~bigcbf.control.encounters.accumulate_evidence`) has reached
-    ``commit_evidence_js``; either releases the commitment. The first sided mode
+    fallback), unless the committed side is blocked: a count that rises by one at each selection at which every
+    candidate on that side fails eq:behavior_acceptance (22) and falls by one (not below 0) at each at which one
+    passes has reached ``commit_release_selections`` (K; K consecutive rejections, or more when they alternate with
+    passes: a side that is rejected, passes once after a REVERSE and is rejected again must not hold the robot
+    forever, as on the dev world clutter_00008), or the evidence for the other side (the leaky sum of its cost
+    advantage beyond w_sw, :func:`~bigcbf.control.encounters.accumulate_evidence`; the full per-selection cap when
+    only the other side has a viable mode) has reached ``commit_evidence_js``; either releases the commitment. The
+    first sided mode
     selected during an encounter commits it. While an encounter is current, the side commitment above takes its
     side from the encounter (none for an uncommitted one), not from the last sided mode.
     """
@@ -98,12 +102,12 @@ class BehaviorSelector:
         side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
         if enc.side != 0:
             if (np.asarray(img.accepted) & (side == enc.side)).any():
-                enc.blocked = 0
+                enc.blocked = max(enc.blocked - 1, 0)
             else:
                 enc.blocked += 1
             J = np.where(acc, img.J, np.inf)
             j_keep, j_other = J[side != -enc.side].min(initial=np.inf), J[side == -enc.side].min(initial=np.inf)
-            if np.isfinite(j_keep) and np.isfinite(j_other):      # the evidence for the other side (encounters.py)
+            if np.isfinite(j_other):                              # the evidence for the other side (encounters.py)
                 enc.evidence = accumulate_evidence(enc.evidence, j_keep - j_other, self.params)
             else:
                 enc.evidence *= EVIDENCE_LEAK

@@ -312,7 +312,7 @@ class PlusRules:
     - ``encounter_commitment`` (issue 25): the passing side is kept per encounter (``bigcbf.control.encounters``:
       an obstacle's group being passed, joined across changing track ids) until the encounter is behind the robot
       or every candidate on its side fails ``eq:behavior_acceptance`` (22) at ``commit_release_selections``
-      consecutive selections, or the leaky evidence for the other side (its cost advantage beyond w_sw, summed
+      consecutive selections (a selection at which it passes takes one back), or the leaky evidence for the other side (its cost advantage beyond w_sw, summed
       over time) reaches ``commit_evidence_js``; the opposite side's modes are no candidates meanwhile (off:
       ``side_commitment`` alone).
     - ``executed_speed`` (issue 25): a candidate that ``eq:behavior_acceptance`` (22) rejects at its speed limit is

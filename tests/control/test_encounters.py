@@ -118,14 +118,21 @@ def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_ov
         assert slow.v_max_mps * slow.N * slow.dt_s >= params.v_max_mps * params.N * params.dt_s - 1e-9
         assert speed_params(params, s) is slow                               # cached
     st = RobotState(0.0, 0.0, 0.0)
-    obs = Obstacles.from_lists([[1.2, 0.43], [1.2, -0.43]], r=0.15)          # a 0.56 m gap 1.05 m ahead
-    img = imagine(st, obs, (4.0, 0.0), params, rules=PlusRules())
-    out, scale = judge_at_executed_speed(img, st, obs, (4.0, 0.0), params, shared=True, current=None,
+    # a slow walker (0.3 m/s, the robot's way) 0.9 m ahead, 0.15 m right of the line, in a 2.4 m corridor
+    xs = np.arange(-0.5, 3.0, 0.25)
+    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
+                                 ids=-np.ones(2 * len(xs), int))
+    obs = walls.concat(Obstacles.from_lists([[0.9, -0.15]], v=[[0.3, 0.0]], r=0.25, ids=[5]))
+    img = imagine(st, obs, (9.0, 0.0), params, rules=PlusRules())
+    out, scale = judge_at_executed_speed(img, st, obs, (9.0, 0.0), params, shared=True, current=None,
                                          rules=PlusRules())
     gained = ~img.accepted & out.accepted
-    assert gained.any()
-    assert set(scale[gained]) <= set(SCALES) and np.all(scale[img.accepted] == 1.0)
-    assert np.all(out.h_min[gained] >= -params.eps_h_m2)
+    # rejected at full speed: GOAL (into the walker's back) and PASS-R (its free side, 0.55 m of corridor);
+    # at 0.35 v_max GOAL follows it, at 0.6 v_max PASS-R passes it
+    assert dict(zip(img.modes, img.accepted))["GOAL"] == dict(zip(img.modes, img.accepted))["PASS-R"] == False
+    assert dict(zip(out.modes, scale)) == dict(GOAL=0.35, **{"PASS-L": 1.0, "PASS-R": 0.6, "SIDE-L": 1.0,
+                                                             "SIDE-R": 1.0, "YIELD": 1.0})
+    assert np.all(out.h_min[gained] >= 0.0) and np.all(img.h_min[gained] < -params.eps_h_m2)
     assert np.all(out.J[img.accepted] == img.J[img.accepted])                # full-speed rows untouched
 
 
