@@ -150,6 +150,19 @@ class ModelFit:
 
 
 # --- the model and its parameters ------------------------------------------------------------------------------
+def require_sysid():
+    """``mujoco.sysid``, or one line saying how to install it (its optional dependencies missing, the package
+    imports empty)."""
+    try:
+        from mujoco import sysid
+    except ImportError:
+        sysid = None
+    if sysid is None or not hasattr(sysid, "optimize"):
+        raise UserError("the model fit needs MuJoCo's system identification (mujoco >= 4 with its sysid extra): "
+                        "pip install 'bigcbf[sysid]'")
+    return sysid
+
+
 def base_spec(robot_name: str):
     """The robot's scene (robot + floor) as an MjSpec with a velocity sensor on each wheel joint."""
     import mujoco
@@ -492,6 +505,7 @@ def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
     """Fit the model's parameters (module docstring) to a log (LogData on its analysis time base) behind the
     command layer ``front``; ``imu``: the IMU yaw rate (t after the first command, rate) or None."""
     c0 = time.process_time()
+    require_sysid()
     pb = problem(data, front, robot_name, opt, imu)
     params = parameters(robot_name)
     names = params.keys()

@@ -54,7 +54,10 @@ def run(args) -> int:
     if args.report is not None:
         check_output_dir(args.report, "report folder")
     if args.model is not None:
+        from twin.model_fit import require_sysid
+
         from ..robots import folder
+        require_sysid()                      # before the work: mujoco.sysid missing is one line
         folder(args.robot)                   # an unknown robot: one line naming the known ones
         check_distinct({"log": args.log}, {"--model": args.model, "--out": args.out, "--report": args.report})
         check_output_dir(args.model, "model folder")

@@ -53,6 +53,9 @@ def run(args) -> int:
     if args.robot is not None:
         from ..robots import folder
         folder(str(args.robot))              # not a robot folder: one line saying what one holds
+    if args.model:
+        from twin.model_fit import require_sysid
+        require_sysid()                      # before the work: mujoco.sysid missing is one line
     holdout = args.holdout if args.holdout is not None else (0.4 if args.model else 0.0)
     res = replay_log(args.log, args.profile, opt=ReplayOptions(window_s=args.window, fit=args.fit, model=args.model,
                                                                holdout=holdout),
