@@ -57,7 +57,7 @@ CHANNELS = ("vx", "vy", "wz", "imu wz")
 #: the smallest per-channel scale of the residual [m/s, m/s, rad/s, rad/s]: an axis the log barely drives (a
 #: differential robot's vy) must not be blown up to the others' weight
 MIN_SCALE = 0.05
-#: identified only when the difference columns at two steps correlate at least this much
+#: identified only when the difference columns over two disjoint pairs of steps correlate at least this much
 MIN_REPRODUCIBLE = 0.5
 #: coarse_start's box: this far from the start in each fit coordinate (log: a factor of 2; damping: 2 units)
 COARSE_HALF = 0.7
@@ -404,23 +404,32 @@ def block_bootstrap(J: np.ndarray, r: np.ndarray, n_ch: int, block_bins: int, n_
     return np.quantile(steps, a, axis=0), np.quantile(steps, 1 - a, axis=0)
 
 
-def reproducible_columns(pb: Problem, params, J_fwd: np.ndarray, r: np.ndarray, h: float):
-    """The Jacobian (the mean of forward differences at steps h and h/2) and, per parameter, the correlation of
-    those two columns: a parameter whose effect on the measured signals is information gives nearly the same
-    column at both steps (up to curvature); one whose finite difference is the contact dynamics' chaos (the
-    simulated yaw rate jumps with any change of the model, by about 0.06 rad/s in 1-s bins) gives two unrelated
-    ones."""
+def reproducible_columns(pb: Problem, params, r: np.ndarray, h: float):
+    """The Jacobian at the fit and, per parameter, whether its effect is reproducible: two difference columns that
+    share no simulated point, (r(x+h) - r(x-h)) / 2h and (r(x+2h) - r(x-2h)) / 4h (near the lower bound the
+    one-sided (r(x+h) - r(x)) / h and (r(x+3h) - r(x+h)) / 2h), and their correlation. A parameter whose effect on
+    the measured signals is information gives nearly the same column twice; one whose differences are the contact
+    dynamics' chaos (the simulated yaw rate jumps with any change of the model, by about 0.06 rad/s in 1-s bins)
+    gives two unrelated ones. Returns (the mean of the two columns, the correlations)."""
     fn = residual_fn(pb)
     x = params.as_vector()
-    _, hi = params.get_bounds()
-    J, corr = J_fwd.copy(), np.zeros(len(x))
+    lo, _ = params.get_bounds()
+    J, corr = np.zeros((len(r), len(x))), np.zeros(len(x))
+
+    def at(i, d):
+        xs = x.copy()
+        xs[i] += d
+        return fn(xs, params)[0][0]
+
     for i in range(len(x)):
-        hh = 0.5 * h if x[i] + 0.5 * h <= hi[i] else -0.5 * h
-        xh = x.copy()
-        xh[i] += hh
-        half = (fn(xh, params)[0][0] - r) / hh
-        J[:, i] = 0.5 * (J_fwd[:, i] + half)
-        a, b = J_fwd[:, i] - J_fwd[:, i].mean(), half - half.mean()
+        if x[i] - 2 * h >= lo[i]:
+            a = (at(i, h) - at(i, -h)) / (2 * h)
+            b = (at(i, 2 * h) - at(i, -2 * h)) / (4 * h)
+        else:
+            rh = at(i, h)
+            a, b = (rh - r) / h, (at(i, 3 * h) - rh) / (2 * h)
+        J[:, i] = 0.5 * (a + b)
+        a, b = a - a.mean(), b - b.mean()
         corr[i] = float(a @ b / max(np.sqrt((a @ a) * (b @ b)), 1e-300))
     params.update_from_vector(x)
     return J, corr
@@ -472,9 +481,9 @@ def _judge(names, x, lo_b, hi_b, lo, hi, iid, corr, opt: ModelFitOptions) -> tup
             why.append("the measured signals do not depend on it (mujoco.sysid: infinite interval, a null direction "
                        "of the Jacobian)")
         elif corr[i] < MIN_REPRODUCIBLE:
-            why.append(f"its effect on the measured signals is not reproducible (differences at two steps "
-                       f"correlate {corr[i]:.2f}, below {MIN_REPRODUCIBLE}): what changes is the contact dynamics' "
-                       "chaos, not information")
+            why.append(f"its effect on the measured signals is not reproducible (differences over two disjoint "
+                       f"pairs of steps correlate {corr[i]:.2f}, below {MIN_REPRODUCIBLE}): what changes is the "
+                       "contact dynamics' chaos, not information")
         elif min(x[i] - lo_b[i], hi_b[i] - x[i]) <= 0.01 * (hi_b[i] - lo_b[i]):
             why.append("the fit ran to a bound of its search range")
         elif rel > opt.max_rel_width:
@@ -490,7 +499,7 @@ def _intervals(pb: Problem, params, res, r, opt: ModelFitOptions):
     """Bootstrap (lo, hi), sysid's iid half-width and the columns' reproducibility for the non-frozen parameters
     of ``params`` (fit coordinates)."""
     from mujoco import sysid
-    J, corr = reproducible_columns(pb, params, np.asarray(res.jac, float), r, opt.diff_step)
+    J, corr = reproducible_columns(pb, params, r, opt.diff_step)
     x = params.as_vector()
     _, iid = sysid.calculate_intervals([r], J, alpha=1 - opt.level)
     block_bins = max(1, int(round(opt.block_s / opt.bin_s)))
