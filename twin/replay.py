@@ -23,7 +23,12 @@ Models compared, always the first two:
   both answer the same commands, so their shapes match, where the model's own response does not simply add to
   the log's: a lag, a latency jitter or an acceleration ramp trade against the dead time differently on each side);
 - fitted (``--fit``): starting from the calibrated profile, latency, the diagonal gains and the floor friction
-  are tuned to minimise the replay's velocity error (Nelder-Mead on the first ``fit_window_s`` of the log).
+  are tuned to minimise the replay's velocity error (Nelder-Mead on the first ``fit_window_s`` of the log);
+- model (``--model``, or ``--robot DIR``): the MuJoCo model itself fitted with ``mujoco.sysid`` behind the
+  calibrated command layer (twin.model_fit), or a robot folder so fitted, behind its own command layer.
+
+Held out (``holdout`` > 0; ``--model`` holds out 0.4 by default): the calibration and the model fit see only the
+log before the split, every run simulates the whole log, and every score counts from the split on.
 
 Errors: velocity RMSE per axis over all samples; pose drift over consecutive windows of ``window_s``: the
 displacement over the window in the frame of its start, simulated minus logged (m), and the heading change
