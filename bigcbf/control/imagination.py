@@ -158,6 +158,24 @@ class _Governed:
         return w_gov
 
 
+_PREDICTED: list = [None, None]  # the last (key, (Oc, cov)) of _predicted
+
+
+def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
+    """The predicted obstacle positions (N+1, M) complex and covariances (N+1, M, 2, 2) (eq:obs_prop (2),
+    eq:cov_prop (3), eq:predicted_obstacles (4); ``prediction.predict_obstacles``), kept for the next rollout of
+    the same obstacles (the fallback's, in the same selection). Read-only for their users."""
+    q = q_sigma_for(obstacles, params.uncertainty)
+    key = (np.asarray(obstacles.p, float).tobytes(), np.asarray(obstacles.v, float).tobytes(),
+           np.asarray(obstacles.cov, float).tobytes(), np.asarray(q, float).tobytes(), int(N), float(dt))
+    if _PREDICTED[0] != key:
+        P_obs, cov = predict_obstacles(obstacles, N, dt, q)
+        Oc = P_obs[..., 0] + 1j * P_obs[..., 1]
+        Oc.flags.writeable = cov.flags.writeable = False          # shared by the rollouts that reuse them
+        _PREDICTED[:] = [key, (Oc, cov)]
+    return _PREDICTED[1]
+
+
 _GROUPS: list = [None, None]     # the last (key, groups) of _groups
 
 
@@ -192,8 +210,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Oc = cov = governed = None
     Ok = np.zeros((N + 1, 0), complex)
     if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
-        P_obs, cov = predict_obstacles(obstacles, N, dt, q_sigma_for(obstacles, params.uncertainty))
-        Oc = Ok = P_obs[..., 0] + 1j * P_obs[..., 1]                  # (N+1, M)
+        Oc, cov = _predicted(obstacles, N, dt, params)
+        Ok = Oc                                                       # (N+1, M)
         if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)
     policy = PolicyData.build(K.midx, goal, obstacles.p, obstacles.r, params, obs_v=obstacles.v, release=release_v,

@@ -100,18 +100,23 @@ def test_compiled_barrier_terms_are_numpy_bit_for_bit(params, shared, seed):
         assert g.shape == w.shape and np.array_equal(g, w)
 
 
-def test_cached_obstacle_groups_are_those_of_the_scene():
-    """imagination._groups keeps the last scene's groups: alternating scenes (and radii) must each get their own."""
-    rules = PlusRules()
+@pytest.mark.parametrize("rules", [PAPER_RULES, PlusRules()])
+def test_cached_groups_and_predictions_are_those_of_the_scene(rules):
+    """imagination._groups and _predicted keep the last scene's obstacle groups and predictions: alternating
+    scenes (the same positions with other radii, velocities or covariances too) must each get their own."""
     scenes = [scene(s) for s in range(4)]
-    scenes.append((scenes[0][0], scenes[0][1].__class__(scenes[0][1].p, scenes[0][1].v, scenes[0][1].cov,
-                                                        scenes[0][1].r * 3.0, scenes[0][1].static,
-                                                        scenes[0][1].ids), scenes[0][2]))
+    st, o, g = scenes[0]
+    Obs = o.__class__
+    scenes.append((st, Obs(o.p, o.v, o.cov, o.r * 3.0, o.static, o.ids), g))
+    scenes.append((st, Obs(o.p, o.v * 1.5, o.cov, o.r, o.static, o.ids), g))
+    scenes.append((st, Obs(o.p, o.v, o.cov * 2.0, o.r, o.static, o.ids), g))
     fresh = []
     for state, obs, goal in scenes:
         im._GROUPS[:] = [None, None]
+        im._PREDICTED[:] = [None, None]
         fresh.append(im.imagine(state, obs, goal, SIMULATION, rules=rules))
-    for k in [0, 1, 0, 2, 3, 4, 0, 4]:
+    for k in [0, 1, 0, 2, 3, 4, 0, 4, 5, 0, 6, 5, 6]:
         state, obs, goal = scenes[k]
         img = im.imagine(state, obs, goal, SIMULATION, rules=rules)
-        assert np.array_equal(img.p, fresh[k].p) and np.array_equal(img.J, fresh[k].J)
+        for f in ("p", "J", "h_min", "W", "margin"):
+            assert np.array_equal(getattr(img, f), getattr(fresh[k], f)), (k, f)
