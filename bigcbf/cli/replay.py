@@ -70,6 +70,15 @@ def run(args) -> int:
     if args.json:
         print(strict_json(res.to_json()))
         return 0
+    print_result(res, args, best, holdout)
+    for path in (args.video, args.save_robot_profile):
+        if path is not None:
+            print(f"wrote {path}")
+    return 0
+
+
+def print_result(res, args, best, holdout: float) -> None:
+    """The replay's table, the identified axes, the best profile, the model fit and the notes."""
     print(f"replay of {args.log}: velocity RMSE (vx m/s, vy m/s, wz rad/s) and pose drift over {args.window:g} s "
           f"windows, simulated odometry vs logged"
           + ("" if res.scored_from is None else
@@ -105,7 +114,3 @@ def run(args) -> int:
         print("\n".join(res.model_fit.summary_lines()))
     for n in res.notes:
         print(f"note: {n}")
-    for path in (args.video, args.save_robot_profile):
-        if path is not None:
-            print(f"wrote {path}")
-    return 0
