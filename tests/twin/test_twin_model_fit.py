@@ -73,6 +73,7 @@ def test_block_bootstrap_covers_under_autocorrelation():
     assert covered_iid < 0.6 * covered      # of the series under-cover a little at this autocorrelation
 
 
+@pytest.mark.slow
 def test_fit_finds_damping_and_keeps_the_rest_honest(tmp_path):
     """A hidden model with a large wheel damping: the fit identifies it within 10 %; every parameter it does not
     identify is kept at the model's own value with no interval."""
@@ -93,6 +94,7 @@ def test_fit_finds_damping_and_keeps_the_rest_honest(tmp_path):
     assert fit.channels == ["vx", "vy", "wz", "imu wz"] and fit.cpu_s > 0
 
 
+@pytest.mark.slow
 def test_model_recovery_script_one_case(tmp_path):
     """scripts/twin_model_recovery.py on one short hidden model: a row per parameter and the summary's fields."""
     sys.path.insert(0, str(ROOT / "scripts"))
