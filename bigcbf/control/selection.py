@@ -63,7 +63,9 @@ class BehaviorSelector:
     candidate on that side fails eq:behavior_acceptance (22) and falls by one (not below 0) at each at which one
     passes has reached ``commit_release_selections`` (K; K consecutive rejections, or more when they alternate with
     passes: a side that is rejected, passes once after a REVERSE and is rejected again must not hold the robot
-    forever, as on the dev world clutter_00008), or the evidence for the other side (the leaky sum of its cost
+    forever, as on the dev world clutter_00008) while a candidate on the other side passes (with both sides
+    rejected, e.g. behind a walker in a corridor too narrow to overtake in, there is nothing to switch to), or the
+    evidence for the other side (the leaky sum of its cost
     advantage beyond w_sw, :func:`~bigcbf.control.encounters.accumulate_evidence`; the full per-selection cap when
     only the other side has a viable mode) has reached ``commit_evidence_js``; either releases the commitment. The
     first sided mode
@@ -111,7 +113,8 @@ class BehaviorSelector:
                 enc.evidence = accumulate_evidence(enc.evidence, j_keep - j_other, self.params)
             else:
                 enc.evidence *= EVIDENCE_LEAK
-            if (enc.blocked >= self.rules.commit_release_selections
+            other_ok = (np.asarray(img.accepted) & (side == -enc.side)).any()
+            if ((enc.blocked >= self.rules.commit_release_selections and other_ok)
                     or enc.evidence >= self.rules.commit_evidence_js):
                 enc.side, enc.blocked, enc.evidence = 0, 0, 0.0
         self.side = float(enc.side)
