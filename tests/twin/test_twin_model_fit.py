@@ -141,3 +141,26 @@ def test_replay_robot_folder_scores_held_out(tmp_path, capsys):
     # the folder holds the very model the log was recorded with, behind an ideal command layer: the model run
     # tracks the log at least as well as the nominal one
     assert out["runs"]["model"]["velocity_rmse"]["vx"] <= out["runs"]["nominal"]["velocity_rmse"]["vx"] * 1.05
+
+
+def test_run_takes_a_fitted_robot_folder(tmp_path, capsys):
+    """bigcbf run: a scenario whose [robot] model is a fitted robot folder's path, with the folder's command layer
+    as --robot-profile, runs an episode on that model."""
+    import tomli_w
+
+    from bigcbf.params.toml_io import load_toml
+    from bigcbf.scenario import resolve_path
+    folder = tmp_path / "slippery_x3"
+    mf.write_robot_folder(mf.model_with("rosmaster_x3", {"floor_friction": 0.6}, RobotProfile(latency_s=0.04)),
+                          folder)
+    raw = load_toml(resolve_path("required_sidestepping"))
+    raw["robot"]["model"] = str(folder)
+    scen = tmp_path / "scen.toml"
+    scen.write_bytes(tomli_w.dumps(raw).encode())
+    assert main(["run", str(scen), "--robot-profile", str(folder / "profiles" / "slippery_x3.toml"),
+                 "--time-limit", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["time_s"] == pytest.approx(2.0) and out["control_steps"] >= 30
+    from bigcbf.sim.scene import SceneSpec, build_model       # the scene such an episode composes: the folder's
+    m = build_model(SceneSpec(robot=str(folder)))                # floor friction
+    assert m.geom_friction[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0] == pytest.approx(0.6)
