@@ -545,7 +545,9 @@ def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
         for k, i in enumerate(sub):
             ok[i], why[i] = ok2[k], why2[k]
         notes.append("refitted with " + ", ".join(names[i] for i in range(len(names)) if i not in sub)
-                     + " frozen at the model's own value")
+                     + " frozen at the model's own value; the intervals hold if those are right (a robot whose "
+                     "unidentified parameters differ shifts the others beyond them: scripts/twin_model_recovery.py "
+                     "measures by how much)")
     elif not ok.any():
         x = nominal.copy()
         notes.append("the log identifies none of the model's parameters: the model is kept as it is")
