@@ -318,7 +318,8 @@ class PlusRules:
     - ``executed_speed`` (issue 25): a candidate that ``eq:behavior_acceptance`` (22) rejects at its speed limit is
       imagined again at the slower speeds the filter would let it have near obstacles, over the same look-ahead
       distance (the horizon lengthened as the speed falls), and runs at the fastest speed that passes
-      (``bigcbf.control.executed_speed``; off: every candidate judged at v_b^max only).
+      (``bigcbf.control.executed_speed``; off: every candidate judged at v_b^max only). Off by default: on 80 dev
+      worlds it gained nothing (docs/fidelity.md, "Commitment per encounter").
     """
 
     in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
@@ -334,7 +335,7 @@ class PlusRules:
     encounter_commitment: bool = True  # keep the passing side per encounter (control/encounters.py) [on/off]
     commit_release_selections: int = ranged(3, 1, 100)  # K: selections with the side infeasible before release [-]
     commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
-    executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
+    executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
 
     def __post_init__(self):
         check_field_ranges(self)

@@ -106,7 +106,8 @@ def test_the_papers_big_cbf_keeps_no_encounters_and_judges_at_full_speed():
     assert not PAPER_RULES.encounter_commitment and not PAPER_RULES.executed_speed
     assert BigCbfPlanner(P).encounters is None and BigCbfPlanner(P, shared=False).encounters is None
     plus = BigCbfPlusPlanner(P)
-    assert plus.encounters is not None and plus.rules.executed_speed
+    assert plus.encounters is not None and plus.rules.encounter_commitment and not plus.rules.executed_speed
+    assert BigCbfPlusPlanner(P, PlusRules(encounter_commitment=False)).encounters is None
 
 
 def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_over_the_same_distance():
@@ -158,3 +159,24 @@ def test_episodes_report_switches_per_encounter_only_for_methods_with_sides():
     assert plus.encounters >= 1                     # the wide obstacle on the goal line is passed on one side
     dwa = run_episode("required_sidestepping", "dwa", 0, time_limit_s=2.0)
     assert dwa.encounters is None and dwa.encounter_side_switches is None and dwa.switches_per_encounter is None
+
+
+def test_the_planner_runs_a_re_judged_mode_at_its_slower_speed():
+    params = default_stack_params()
+    xs = np.arange(-0.5, 3.0, 0.25)
+    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
+                                 ids=-np.ones(2 * len(xs), int))
+    st = RobotState(0.0, 0.0, 0.0)
+    slowed = 0
+    for y in (-0.15, 0.0, 0.15):          # a slow walker 0.9 m ahead in a 2.4 m corridor (see the test above)
+        obs = walls.concat(Obstacles.from_lists([[0.9, y]], v=[[0.3, 0.0]], r=0.25, ids=[5]))
+        planner = BigCbfPlusPlanner(params, PlusRules(executed_speed=True))
+        u, info = planner.plan(0.0, st, obs, (9.0, 0.0))
+        img = imagine(st, obs, (9.0, 0.0), params, rules=planner.rules)
+        _, scale = judge_at_executed_speed(img, st, obs, (9.0, 0.0), params, shared=True, current=None,
+                                           rules=planner.rules)
+        s = dict(zip(img.modes, scale))[info.mode]
+        limit = params.v_side_mps if info.mode.startswith("SIDE") else params.v_max_mps
+        assert np.hypot(*u[:2]) <= s * limit + 1e-9
+        slowed += s < 1.0
+    assert slowed >= 1                    # the walker's free side or following it, at the re-judged speed
