@@ -91,7 +91,8 @@ def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
                          float(params.range_sigma_m), float(params.range_sigma_frac), order, bounds, occ)
     if nb < 0:                                                                     # (numpy's sines, as before)
         return [Cluster(np.arange(n), False)]
-    return [Cluster(seg, bool(o)) for seg, o in zip(np.split(order, bounds[:nb]), occ[:nb + 1])]
+    cuts = [0, *bounds[:nb].tolist(), n]                      # the segments as views of ``order``, as np.split
+    return [Cluster(order[cuts[s]:cuts[s + 1]], bool(occ[s])) for s in range(nb + 1)]
 
 
 @kernel
@@ -483,36 +484,67 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
 
 
 @kernel
-def _pairwise(a, lo, n):
-    """numpy's pairwise summation of a[lo:lo+n] (``pairwise_sum`` of numpy/_core/src/umath/loops_utils.h: blocks
-    of 8 partial sums up to 128 elements, halves beyond)."""
+def _pairwise_block(a, lo, n):
+    """numpy's ``pairwise_sum`` of a[lo:lo+n] for n <= 128 (numpy/_core/src/umath/loops_utils.h): a plain sum
+    below 8 elements, else 8 partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then
+    the remainder."""
     if n < 8:
         res = 0.0
         for i in range(lo, lo + n):
             res += a[i]
         return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@kernel
+def _pairwise(a, lo, n):
+    """numpy's pairwise summation of a[lo:lo+n]: :func:`_pairwise_block` up to 128 elements, beyond that the sum of
+    the two halves (the first rounded down to a multiple of 8), recursively; the recursion is run on an explicit
+    stack (numba's cache mishandles a recursive kernel called from another module's kernel)."""
     if n <= 128:
-        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-        i = 8
-        while i < n - (n % 8):
-            r0 += a[lo + i]
-            r1 += a[lo + i + 1]
-            r2 += a[lo + i + 2]
-            r3 += a[lo + i + 3]
-            r4 += a[lo + i + 4]
-            r5 += a[lo + i + 5]
-            r6 += a[lo + i + 6]
-            r7 += a[lo + i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[lo + i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise(a, lo, n2) + _pairwise(a, lo + n2, n - n2)
+        return _pairwise_block(a, lo, n)
+    s_lo, s_n = np.empty(64, np.int64), np.empty(64, np.int64)
+    s_stage, s_left = np.zeros(64, np.int64), np.empty(64)
+    top, ret = 0, 0.0
+    s_lo[0], s_n[0], s_stage[0] = lo, n, 0
+    while top >= 0:
+        m = s_n[top]
+        if m <= 128:
+            ret = _pairwise_block(a, s_lo[top], m)
+            top -= 1
+            continue
+        n2 = m // 2
+        n2 -= n2 % 8
+        if s_stage[top] == 0:            # the first half
+            s_stage[top] = 1
+            s_lo[top + 1], s_n[top + 1], s_stage[top + 1] = s_lo[top], n2, 0
+            top += 1
+        elif s_stage[top] == 1:          # the second half
+            s_left[top] = ret
+            s_stage[top] = 2
+            s_lo[top + 1], s_n[top + 1], s_stage[top + 1] = s_lo[top] + n2, m - n2, 0
+            top += 1
+        else:                            # both: their sum
+            ret = s_left[top] + ret
+            top -= 1
+    return ret
 
 
 @kernel

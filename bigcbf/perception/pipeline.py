@@ -71,7 +71,7 @@ import numpy as np
 from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (Cluster, cluster_points, compact_mask, measure_clusters, scan_to_points,
+from .geometry import (Cluster, _pairwise, cluster_points, compact_mask, measure_clusters, scan_to_points,
                        select_wall_points, wall_candidates_many, wall_point_covariance)
 from .tracker import Tracker
 
@@ -84,6 +84,20 @@ def wall_obstacles(points: np.ndarray, cov_m2) -> Obstacles:
            else np.asarray(cov_m2, float).reshape(m, 2, 2))
     return Obstacles(np.asarray(points, float).reshape(m, 2), np.zeros((m, 2)), cov, np.zeros(m),
                      np.ones(m, bool), np.full(m, -1, int))
+
+
+@kernel
+def _grazing(pts, ranges, factor):
+    """:meth:`Perception._grazing` compiled: the (upper) median of the gaps between consecutive points (an order
+    statistic: the same value however found) above ``factor`` times the mean range (numpy's ``mean``: the pairwise
+    sum over the count)."""
+    n = pts.shape[0]
+    gaps = np.empty(n - 1)
+    for i in range(n - 1):
+        dx, dy = pts[i + 1, 0] - pts[i, 0], pts[i + 1, 1] - pts[i, 1]
+        gaps[i] = math.sqrt(dx ** 2 + dy ** 2)
+    spacing = np.sort(gaps)[(n - 1) // 2]
+    return spacing > factor * ((0.0 + _pairwise(ranges, 0, n)) / n)
 
 
 @kernel
@@ -133,10 +147,8 @@ class Perception:
 
     def _grazing(self, pts: np.ndarray, ranges: np.ndarray, angle_increment: float) -> bool:
         """Median spacing of consecutive points above grazing_spacing_factor beam spacings at the mean range."""
-        step = np.diff(pts, axis=0)
-        gaps = np.sqrt(step[:, 0] ** 2 + step[:, 1] ** 2)
-        spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])        # (upper) median
-        return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
+        return _grazing(np.ascontiguousarray(pts, dtype=float), np.ascontiguousarray(ranges, dtype=float),
+                        float(self.params.grazing_spacing_factor * angle_increment))
 
     def _segment(self, sp, clusters: list, is_compact: np.ndarray) -> tuple[list, np.ndarray]:
         """Track-aided segmentation: a cluster that holds known objects (points on the predicted circles of
