@@ -32,7 +32,7 @@ current one until it ends.
 (PASS-L/SIDE-L or PASS-R/SIDE-R) selected during an encounter commits it to that side; while the current
 encounter is committed, the opposite side's modes are not candidates (GOAL and YIELD remain). The commitment is
 released when every candidate on the committed side fails the safety test of ``eq:behavior_acceptance`` (22) at
-``commit_release_selections`` consecutive selections (K = 3, 1.5 s at T_B = 0.5 s; a selection at which the side
+``commit_release_selections`` consecutive selections (K = 5, 2.5 s at T_B = 0.5 s; a selection at which the side
 passes again takes one back, so alternating rejections release it too), and at the end of the encounter, and, as COMPASS (kjungmo/compass) lets a challenger class win, when the evidence for the other side
 (:func:`accumulate_evidence`, a leaky sum of its cost advantage) reaches ``commit_evidence_js``: a side that is
 safe but leads nowhere (a wall beside a doorway) is given up when the other side stays clearly better for a while,

@@ -333,7 +333,7 @@ class PlusRules:
     release_sideways: bool = True  # release from a moving obstacle across its velocity [on/off]
     speed_governor: bool = False  # the liveness option (bigcbf.control.governor) [on/off]
     encounter_commitment: bool = True  # keep the passing side per encounter (control/encounters.py) [on/off]
-    commit_release_selections: int = ranged(3, 1, 100)  # K: selections with the side infeasible before release [-]
+    commit_release_selections: int = ranged(5, 1, 100)  # K: selections with the side infeasible before release [-]
     commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
 
