@@ -176,6 +176,20 @@ def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams) -> 
     return _PREDICTED[1]
 
 
+_PRED_TERM: list = [None, None, None]   # the last (cov, beta, term) of _prediction_term
+
+
+def _prediction_term(cov: np.ndarray, unc) -> np.ndarray:
+    """``kernels.prediction_term`` (eq:uncertainty_margin (21)) of the predicted covariances, kept with the cached
+    predictions of :func:`_predicted` (the same read-only array object, the same beta)."""
+    if _PRED_TERM[0] is cov and _PRED_TERM[1] == unc.beta and not cov.flags.writeable:
+        return _PRED_TERM[2]
+    term = kernels.prediction_term(cov, unc)
+    term.flags.writeable = False
+    _PRED_TERM[:] = [cov, unc.beta, term]
+    return term
+
+
 _GROUPS: list = [None, None]     # the last (key, groups) of _groups
 
 
@@ -226,9 +240,10 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         _rollout_loop(policy.kind, policy.coef, policy.goal, np.ascontiguousarray(Ok), policy.obs_r, policy.groups,
                       policy.alone, policy.release, policy.geometry, np.array(p, complex), N, dt, Pk, Vk)
         THk[:] = th
-        Uk[:N] = Vk[:N] * np.conj(np.exp(1j * th))       # u_k = R(theta)^T v_k, the yaw constant
+        rot = np.exp(1j * th)
+        Uk[:N] = Vk[:N] * np.conj(rot)                    # u_k = R(theta)^T v_k, the yaw constant
         Uk[N] = u = Uk[N - 1]
-        Vk[N] = kernels.execution_velocity_c(np.exp(1j * th), u, a_c, b_c, d_c)
+        Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
         return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, None)
     along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk)
     return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
@@ -383,7 +398,7 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
     if shared:
         kap = kappa_img(obstacles, unc)
         rel_speed = np.abs(Vc[:, :, None] - Ov)                        # ||R(A u + d) - v_i|| (numpy's complex abs)
-        pred = kernels.prediction_term(cov, unc)                       # (N+1, M)
+        pred = _prediction_term(cov, unc)                              # (N+1, M)
         e_exec = kernels.e_exec_speed(speed, ex)                       # (B, N+1)
     else:
         kap, rel_speed, pred, e_exec = 0.0, np.zeros((0, 0, 0)), np.zeros((N + 1, M)), np.zeros((B, N + 1))
