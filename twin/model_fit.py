@@ -61,6 +61,8 @@ MIN_SCALE = 0.05
 MIN_REPRODUCIBLE = 0.5
 #: coarse_start's box: this far from the start in each fit coordinate (log: a factor of 2; damping: 2 units)
 COARSE_HALF = 0.7
+#: how far a frozen (not identified) parameter may be from the model's own value, in fit coordinates (_refit)
+NUISANCE_HALF = 0.7
 #: the damping's coordinate unit, as a fraction of the nominal kv (parameters())
 DAMPING_UNIT = 0.1
 FIRMWARE_TICK_S = 0.01          # the wheel limiter runs every firmware tick, as in SimWorld.step
@@ -404,13 +406,14 @@ def block_bootstrap(J: np.ndarray, r: np.ndarray, n_ch: int, block_bins: int, n_
     return np.quantile(steps, a, axis=0), np.quantile(steps, 1 - a, axis=0)
 
 
-def reproducible_columns(pb: Problem, params, r: np.ndarray, h: float):
+def reproducible_columns(pb: Problem, params, r: np.ndarray, h: float, only=None):
     """The Jacobian at the fit and, per parameter, whether its effect is reproducible: two difference columns that
     share no simulated point, (r(x+h) - r(x-h)) / 2h and (r(x+2h) - r(x-2h)) / 4h (near the lower bound the
     one-sided (r(x+h) - r(x)) / h and (r(x+3h) - r(x+h)) / 2h), and their correlation. A parameter whose effect on
     the measured signals is information gives nearly the same column twice; one whose differences are the contact
     dynamics' chaos (the simulated yaw rate jumps with any change of the model, by about 0.06 rad/s in 1-s bins)
-    gives two unrelated ones. Returns (the mean of the two columns, the correlations)."""
+    gives two unrelated ones. Returns (the mean of the two columns, the correlations), for the parameters ``only``
+    (indices; None: all; the others' columns are left zero)."""
     fn = residual_fn(pb)
     x = params.as_vector()
     lo, _ = params.get_bounds()
@@ -421,7 +424,7 @@ def reproducible_columns(pb: Problem, params, r: np.ndarray, h: float):
         xs[i] += d
         return fn(xs, params)[0][0]
 
-    for i in range(len(x)):
+    for i in range(len(x)) if only is None else only:
         if x[i] - 2 * h >= lo[i]:
             a = (at(i, h) - at(i, -h)) / (2 * h)
             b = (at(i, 2 * h) - at(i, -2 * h)) / (4 * h)
@@ -506,7 +509,7 @@ def _intervals(pb: Problem, params, res, r, opt: ModelFitOptions):
     d_lo, d_hi = block_bootstrap(J, r, len(pb.channels), block_bins, opt.n_boot, opt.level,
                                  np.random.default_rng(opt.seed))
     lo_b, hi_b = params.get_bounds()
-    return np.clip(x + d_lo, lo_b, hi_b), np.clip(x + d_hi, lo_b, hi_b), np.asarray(iid, float), corr
+    return np.clip(x + d_lo, lo_b, hi_b), np.clip(x + d_hi, lo_b, hi_b), np.asarray(iid, float), corr, J
 
 
 def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
@@ -524,30 +527,12 @@ def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
     fitted, res, r = _optimize(pb, params, opt)
     lo_b, hi_b = params.get_bounds()
     x = fitted.as_vector()
-    lo, hi, iid, corr = _intervals(pb, fitted, res, r, opt)
+    lo, hi, iid, corr, _ = _intervals(pb, fitted, res, r, opt)
     ok, why = _judge(names, x, lo_b, hi_b, lo, hi, iid, corr, opt)
     notes = []
     if ok.any() and not ok.all():        # refit what the log identifies, the rest frozen at the model's own
-        again = parameters(robot_name)
-        for i, n in enumerate(names):
-            if ok[i]:
-                again[n].update_from_vector(np.array([x[i]]))
-            else:
-                again[n].frozen = True
-        refit, res2, r = _optimize(pb, again, opt, coarse=False)
-        sub = [i for i in range(len(names)) if ok[i]]
-        lo2, hi2, iid2, corr2 = _intervals(pb, refit, res2, r, opt)
-        xs = refit.as_vector()
-        ok2, why2 = _judge([names[i] for i in sub], xs, lo_b[sub], hi_b[sub], lo2, hi2, iid2, corr2, opt)
-        x, lo, hi, iid = nominal.copy(), np.full(len(names), np.nan), np.full(len(names), np.nan), np.full(
-            len(names), np.inf)
-        x[sub], lo[sub], hi[sub], iid[sub] = xs, lo2, hi2, iid2
-        for k, i in enumerate(sub):
-            ok[i], why[i] = ok2[k], why2[k]
-        notes.append("refitted with " + ", ".join(names[i] for i in range(len(names)) if i not in sub)
-                     + " frozen at the model's own value; the intervals hold if those are right (a robot whose "
-                     "unidentified parameters differ shifts the others beyond them: scripts/twin_model_recovery.py "
-                     "measures by how much)")
+        x, lo, hi, iid, note = _refit(pb, robot_name, x, ok, why, opt)
+        notes.append(note)
     elif not ok.any():
         x = nominal.copy()
         notes.append("the log identifies none of the model's parameters: the model is kept as it is")
@@ -563,6 +548,47 @@ def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
     return ModelFit(robot_name, names, ph(nominal), ph(x), ph(lo), ph(hi), iid, ok, why,
                     opt.level, pb.channels, rms(r0), rms(r_fin), front, float(pb.edges[-1]),
                     time.process_time() - c0, pb.evaluations, notes)
+
+
+def _refit(pb: Problem, robot_name: str, x: np.ndarray, ok: np.ndarray, why: list[str], opt: ModelFitOptions):
+    """Refit the identified parameters with the others frozen at the model's own values; their intervals widened
+    by what the frozen ones could shift them (below); ``ok`` and ``why`` updated in place. Returns (x, lo, hi,
+    iid half-width, note), all in fit coordinates.
+
+    A frozen parameter is not known to be the model's own value: a robot whose chassis is heavier than the
+    model's moves the wheel damping the fit finds. Each identified parameter's interval is therefore widened on both
+    sides by sum_f |S_if| w_f, S = -(J_id' J_id)^-1 J_id' J_f the linearised shift of the identified parameters per
+    unit of frozen parameter f (its columns from :func:`reproducible_columns` at the refit), w_f = NUISANCE_HALF
+    (the frozen parameters are taken as known within a factor of 2, the damping within 2 units)."""
+    names = parameters(robot_name).keys()
+    again = parameters(robot_name)
+    nominal = again.as_nominal_vector()
+    for i, n in enumerate(names):
+        if ok[i]:
+            again[n].update_from_vector(np.array([x[i]]))
+        else:
+            again[n].frozen = True
+    lo_b, hi_b = again.get_bounds()
+    refit, res, r = _optimize(pb, again, opt, coarse=False)
+    sub = [i for i in range(len(names)) if ok[i]]
+    frozen = [i for i in range(len(names)) if not ok[i]]
+    lo2, hi2, iid2, corr2, J_id = _intervals(pb, refit, res, r, opt)
+    xs = refit.as_vector()
+    full = parameters(robot_name)
+    x_full = nominal.copy()
+    x_full[sub] = xs
+    full.update_from_vector(x_full)
+    J_f = reproducible_columns(pb, full, r, opt.diff_step, only=frozen)[0][:, frozen]
+    shift = np.abs(np.linalg.lstsq(J_id, J_f, rcond=1e-10)[0]) @ np.full(len(frozen), NUISANCE_HALF)
+    lo2, hi2 = np.maximum(lo2 - shift, lo_b), np.minimum(hi2 + shift, hi_b)
+    ok2, why2 = _judge([names[i] for i in sub], xs, lo_b, hi_b, lo2, hi2, iid2, corr2, opt)
+    x, lo, hi, iid = nominal.copy(), np.full(len(names), np.nan), np.full(len(names), np.nan), np.full(len(names),
+                                                                                                      np.inf)
+    x[sub], lo[sub], hi[sub], iid[sub] = xs, lo2, hi2, iid2
+    for k, i in enumerate(sub):
+        ok[i], why[i] = ok2[k], why2[k]
+    return x, lo, hi, iid, ("refitted with " + ", ".join(names[i] for i in frozen) + " frozen at the model's own "
+                            "value; the intervals include what those could shift within a factor of 2")
 
 
 # --- the fitted robot folder ---------------------------------------------------------------------------------------
