@@ -374,7 +374,7 @@ class Episode:
         ts = w.true_state()
         self.metrics.control_step(w.t, state, ts, self.goal, u_in, u_safe, pinfo, finfo)
         if self._sides is not None and pinfo.mode != EXTERNAL:
-            self._sides.add(w.t, state, obs_now, goal, pinfo.mode)
+            self._sides.add(w.t, state, obs_now, goal, pinfo.mode, pinfo.planned)
         if self.peds.k:                                   # near misses with people (sim/contacts.py)
             self.metrics.near_miss(*near_miss(self.truth.distance, (ts.px, ts.py, ts.theta), _world_velocity(ts),
                                               self.walkers.positions(), self.walkers.velocities), PERSONAL_SPACE_M)

@@ -177,7 +177,7 @@ class EncounterTracker:
 
 class EncounterSideRecorder:
     """The metric ``switches_per_encounter`` of an episode (README, metrics glossary), for a method with sided modes
-    (PASS-L/SIDE-L left, PASS-R/SIDE-R right: ``liveness.mode_side``). At every control step: the current encounter
+    (PASS-L/SIDE-L left, PASS-R/SIDE-R right: ``liveness.mode_side``). At every planning cycle: the current encounter
     (:class:`EncounterTracker` with ``big-cbf-plus``'s default look-ahead and band, whatever the method, so every
     method is measured against the same encounters) and the method's mode. A *side switch* is a change between left
     and right among the sided modes selected while the same encounter is current (neutral modes in between do not
@@ -188,8 +188,15 @@ class EncounterSideRecorder:
         self.tracker = EncounterTracker(params, PlusRules())
         self.last_side: dict[int, int] = {}
         self.switches = 0
+        self._mode: str | None = None
 
-    def add(self, t: float, state, obstacles: Obstacles, goal, mode: str) -> None:
+    def add(self, t: float, state, obstacles: Obstacles, goal, mode: str, planned: bool = True) -> None:
+        """One control step. The tracker is updated at the steps that ran a planning cycle (``planned``; BIG-CBF's
+        selections, every T_B, where its mode can change, as its own tracker is) and whenever the mode changed;
+        other steps are skipped (updating at every control step cost 0.4 ms a step)."""
+        if not planned and mode == self._mode:
+            return
+        self._mode = mode
         enc = self.tracker.update(t, (state.px, state.py), goal, obstacles)
         s = mode_side(mode)
         if enc is None or s == 0:
