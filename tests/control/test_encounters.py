@@ -180,3 +180,13 @@ def test_the_planner_runs_a_re_judged_mode_at_its_slower_speed():
         assert np.hypot(*u[:2]) <= s * limit + 1e-9
         slowed += s < 1.0
     assert slowed >= 1                    # the walker's free side or following it, at the re-judged speed
+
+
+def test_the_metric_tracks_encounters_at_planning_cycles_and_mode_changes():
+    rec = EncounterSideRecorder(P)
+    rec.add(0.0, RobotState(0.0, 0.0, 0.0), _post(2.0, 0.0), GOAL, "GOAL", planned=True)
+    assert rec.tracker.opened == 1
+    rec.add(0.05, RobotState(0.0, 0.0, 0.0), _post(1.0, 3.0, ident=4), GOAL, "GOAL", planned=False)
+    assert rec.tracker.open[0].t_seen == 0.0                   # a control step without a selection: skipped
+    rec.add(0.1, RobotState(0.0, 0.0, 0.0), _post(2.0, 0.0), GOAL, "PASS-L", planned=False)
+    assert rec.tracker.open[0].t_seen == 0.1 and rec.metrics()["encounters"] == 1   # the mode changed: counted
