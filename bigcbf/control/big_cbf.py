@@ -11,6 +11,7 @@ imagination chose for it (:func:`~bigcbf.control.imagination.choose_release`); n
 is replayed."""
 from __future__ import annotations
 
+import dataclasses
 import time
 import numpy as np
 
@@ -137,3 +138,5 @@ class BigCbfPlusPlanner(BigCbfPlanner):
     def __init__(self, params: StackParams, rules: PlusRules | None = None):
         super().__init__(params, shared=True, rules=PlusRules() if rules is None else rules)
         self.name = "big-cbf-plus"
+        if self.rules.velocity_rows:   # the common filter with its velocity-aware rows (methods.filter_params)
+            self.filter_params = dataclasses.replace(params, cbf_velocity_rows=True)

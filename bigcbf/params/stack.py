@@ -320,6 +320,9 @@ class PlusRules:
       distance (the horizon lengthened as the speed falls), and runs at the fastest speed that passes
       (``bigcbf.control.executed_speed``; off: every candidate judged at v_b^max only). Off by default: on 80 dev
       worlds it gained nothing (docs/fidelity.md, "Commitment per encounter").
+    - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
+      (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
+      with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
     """
 
     in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
@@ -336,6 +339,7 @@ class PlusRules:
     commit_release_selections: int = ranged(5, 1, 100)  # K: selections with the side infeasible before release [-]
     commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
+    velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
 
     def __post_init__(self):
         check_field_ranges(self)
