@@ -46,8 +46,12 @@ paper's configuration: the least-violation command above), "brake" (u = 0: the r
 contact that follows is the other's doing; fallback "brake"), or "evade" (the full-speed sidestep, at v_max, across
 the path of the obstacle whose row the least-violation command violates most, on the side of that path where the
 robot is, projected on the other obstacles' rows by the same slack QP; fallback "evade"; when that obstacle is a wall
-point or moves slower than ``cbf_velocity_min_speed_mps``, the least-violation command). Every variant is still
-clipped to the box and its row violation measured.
+point or moves slower than ``cbf_velocity_min_speed_mps``, the least-violation command), or "passive" (the
+least-violation command with its approach toward every body whose barrier is already violated, h_i^exec < 0, taken
+out: the robot's own velocity toward such a body, q_i^T R(theta)(A u + d) < 0, is projected to zero, a few
+alternating projections over those bodies; passive safety, the notion HuNavSim's and the at-fault classification
+use: a contact that follows is not the robot's doing; fallback "passive"). Every variant is still clipped to the box
+and its row violation measured.
 
 The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): every selected tracked obstacle
 that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same
@@ -465,6 +469,8 @@ class CbfFilter:
         p = self.params
         if p.cbf_last_resort == "brake":
             return np.zeros(3), "brake"
+        if p.cbf_last_resort == "passive":
+            return self._passive(state, rows, u_slack), "passive"
         obst = sel if owner is None else owner[sel]
         k = int(np.argmax(lvec - C @ u_slack))
         j = int(obst[k])
@@ -481,6 +487,35 @@ class CbfFilter:
         if lv is None:
             return u_slack, "least-violation"
         return lv[1], "evade"
+
+    def _passive(self, state: RobotState, rows: CbfRows, u: np.ndarray, sweeps: int = 20) -> np.ndarray:
+        """The "passive" last resort (module docstring): u with its approach toward every body inside its D_i^exec
+        (h_i < 0) removed. In the normalized rows, the robot's velocity R(theta)(A u + d) does not approach body i iff
+        C_i u >= f_i = -2 q_i^T R(theta) d_xy / ||a_i|| (C_i u = 2 q_i^T R(theta) A_xy u / ||a_i||,
+        eq:cbf_condition (25)). Alternating projections onto those half-planes and the actuator box (``sweeps``
+        passes); what is still short of a half-plane then is closed by scaling u toward 0 (the largest factor in
+        [0, 1] that meets every f_i that u = 0 meets)."""
+        inside = np.flatnonzero((rows.h < 0) & (rows.norm > 0))
+        if not len(inside):
+            return u
+        c, s = math.cos(state.theta), math.sin(state.theta)
+        dxy = np.asarray(self.params.uncertainty.execution.d[:2], float)
+        drift = np.array([c * dxy[0] - s * dxy[1], s * dxy[0] + c * dxy[1]])        # R(theta) d_xy
+        floor = -2.0 * (rows.q[inside] @ drift) / rows.norm[inside]
+        Ci = rows.C[inside]
+        n2 = np.einsum("ij,ij->i", Ci, Ci)
+        u = np.minimum(np.maximum(np.asarray(u, float), self.lo), self.hi)
+        for _ in range(sweeps):
+            for k in range(len(inside)):
+                gap = floor[k] - float(Ci[k] @ u)
+                if gap > 0 and n2[k] > 0:
+                    u = u + gap * Ci[k] / n2[k]
+            u = np.minimum(np.maximum(u, self.lo), self.hi)
+        cu = Ci @ u
+        short = (cu < floor - 1e-12) & (floor <= 0)          # f_i that u = 0 meets (C_i 0 = 0 >= f_i)
+        if short.any():     # C_i (t u) >= f_i for t <= f_i / C_i u (C_i u < f_i <= 0)
+            u = u * float(np.clip(np.min(floor[short] / cu[short]), 0.0, 1.0))
+        return u
 
     def _brake_for_fault(self, u_in: np.ndarray, obstacles: Obstacles, fault: str, t0: float):
         """A perception fault (module docstring): u_safe = 0, nothing of the estimates used."""

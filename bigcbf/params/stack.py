@@ -160,7 +160,7 @@ class UncertaintyParams:
 
 
 #: StackParams.cbf_last_resort's choices (bigcbf.control.cbf)
-LAST_RESORTS = ("slack", "brake", "evade")
+LAST_RESORTS = ("slack", "brake", "evade", "passive")
 
 
 @dataclass(frozen=True)
@@ -201,7 +201,9 @@ class StackParams:
     - ``cbf_last_resort``: what the filter commands when no command satisfies every row (``bigcbf.control.cbf``):
       ``slack`` (default, the least worst-case violation, then minimum intervention), ``brake`` (u = 0) or
       ``evade`` (a full-speed sidestep across the path of the obstacle of the worst row, if it moves, projected on
-      the other rows by the same least-violation QP).
+      the other rows by the same least-violation QP) or ``passive`` (the least-violation command without its
+      approach toward every body the robot is already inside D_i^exec of: passive safety, the robot does not move
+      into what it is too close to).
     """
 
     T_B_s: float = ranged(0.5, 0.002, 60)  # behavior-selection period [s]
