@@ -138,5 +138,6 @@ class BigCbfPlusPlanner(BigCbfPlanner):
     def __init__(self, params: StackParams, rules: PlusRules | None = None):
         super().__init__(params, shared=True, rules=PlusRules() if rules is None else rules)
         self.name = "big-cbf-plus"
-        if self.rules.velocity_rows:   # the common filter with its velocity-aware rows (methods.filter_params)
-            self.filter_params = dataclasses.replace(params, cbf_velocity_rows=True)
+        # the common filter with its velocity-aware rows and its last resort (methods.filter_params)
+        self.filter_params = dataclasses.replace(params, cbf_last_resort=self.rules.last_resort,
+                                                 cbf_velocity_rows=params.cbf_velocity_rows or self.rules.velocity_rows)

@@ -325,6 +325,9 @@ class PlusRules:
     - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
       (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
+    - ``last_resort`` (issue 23): the common filter's last resort in big-cbf-plus's episodes, one of
+      ``LAST_RESORTS`` (``StackParams.cbf_last_resort``; "slack" is the run's default). "passive" by default: on
+      the generated test split it removed the one at-fault contact of "slack" (docs/fidelity.md).
     """
 
     in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
@@ -342,12 +345,15 @@ class PlusRules:
     commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
+    last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
 
     def __post_init__(self):
         check_field_ranges(self)
         for f in dataclasses.fields(self):
             if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
                 raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
+        if self.last_resort not in LAST_RESORTS:
+            raise FieldError("last_resort", f"must be one of {', '.join(LAST_RESORTS)}, got {str(self.last_resort)[:40]!r}")
         for k in ("in_way_margin_m", "relevant_range_m"):
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")
