@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..control.metrics import cbf_energy
+from ..control.metrics import cbf_energy, percentile
 from ..logio import convert, msgdefs
 from . import transport
 from .stack import FILTER_ONLY, SafetyStack
@@ -77,7 +77,7 @@ class FilterStats:
 
     def summary(self) -> dict:
         def p(xs, q):
-            return round(float(np.percentile(xs, q)), 4) if xs else None
+            return round(percentile(xs, q), 4) if xs else None
         return {"steps": self.steps, "scans": self.scans, "zero_commands": dict(self.zero_commands),
                 "cbf_active_ratio": self.cbf_active / self.steps if self.steps else 0.0,
                 "qp_infeasible_ratio": self.infeasible / self.steps if self.steps else 0.0,

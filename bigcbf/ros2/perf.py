@@ -29,14 +29,14 @@ import subprocess
 import sys
 import time
 
-import numpy as np
+from ..control.metrics import percentile
 
 SCENARIO, SEED = "single_person_crossing", 0
 ENTRY = "import sys; from bigcbf.cli import main; sys.exit(main())"
 
 
 def _p(xs, q):
-    return round(float(np.percentile(xs, q)), 4) if len(xs) else None
+    return round(percentile(xs, q), 4) if len(xs) else None
 
 
 def _inprocess(sent, goal, mount, method: str) -> tuple[list[float], list[float]]:
