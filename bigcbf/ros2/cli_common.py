@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 
 from ..errors import UserError
-from .transport import MAX_DOMAIN_ID
+from .transport import MAX_DOMAIN_ID, check_domain_id
 
 
 def add_dds_arguments(p) -> None:
@@ -22,14 +22,12 @@ def add_dds_arguments(p) -> None:
 
 
 def _domain_id(s: str) -> int:
+    """--domain-id's type: a whole number, checked by the transport's own rule (``transport.check_domain_id``)."""
     import argparse
     try:
-        v = int(s)
-    except ValueError:
+        return check_domain_id(int(s))
+    except (ValueError, UserError):
         raise argparse.ArgumentTypeError(f"expected a whole number in [0, {MAX_DOMAIN_ID}], got {s!r}") from None
-    if not 0 <= v <= MAX_DOMAIN_ID:
-        raise argparse.ArgumentTypeError(f"expected a whole number in [0, {MAX_DOMAIN_ID}], got {v}")
-    return v
 
 
 def domain_id(args) -> int:
