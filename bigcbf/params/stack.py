@@ -163,6 +163,12 @@ class UncertaintyParams:
 LAST_RESORTS = ("slack", "brake", "evade", "passive")
 
 
+def check_last_resort(field: str, value) -> None:
+    """A last resort's name (StackParams.cbf_last_resort, PlusRules.last_resort): one of LAST_RESORTS."""
+    if value not in LAST_RESORTS:
+        raise FieldError(field, f"must be one of {', '.join(LAST_RESORTS)}, got {str(value)[:40]!r}")
+
+
 @dataclass(frozen=True)
 class StackParams:
     """Everything the BIG-CBF stack needs (Table I defaults; choices not in the paper documented here).
@@ -273,9 +279,7 @@ class StackParams:
             raise FieldError("H_diag", "must be > 0 (H positive definite)")
         if not all(r >= 0 and math.isfinite(r) for r in self.R_u_diag):
             raise FieldError("R_u_diag", "must be >= 0")
-        if self.cbf_last_resort not in LAST_RESORTS:
-            raise FieldError("cbf_last_resort", f"must be one of {', '.join(LAST_RESORTS)}, got "
-                             f"{str(self.cbf_last_resort)[:40]!r}")
+        check_last_resort("cbf_last_resort", self.cbf_last_resort)
         if not isinstance(self.cbf_velocity_rows, bool):
             raise FieldError("cbf_velocity_rows", f"must be true or false, got {self.cbf_velocity_rows!r}")
 
@@ -352,8 +356,7 @@ class PlusRules:
         for f in dataclasses.fields(self):
             if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
                 raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
-        if self.last_resort not in LAST_RESORTS:
-            raise FieldError("last_resort", f"must be one of {', '.join(LAST_RESORTS)}, got {str(self.last_resort)[:40]!r}")
+        check_last_resort("last_resort", self.last_resort)
         for k in ("in_way_margin_m", "relevant_range_m"):
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")
