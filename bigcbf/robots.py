@@ -83,7 +83,8 @@ def check_robot_name(name) -> str:
     """``name`` if it is a registered robot or a robot folder's path, else a ValueError whose message lists the
     known ones."""
     if not isinstance(name, str) or (name not in ROBOTS and robot_folder_path(name) is None):
-        raise ValueError(f"unknown robot {str(name)[:60]!r}; known: {', '.join(ROBOTS)} (bigcbf/robots.py), or a "
+        shown = str(name) if len(str(name)) <= 80 else "..." + str(name)[-77:]    # a path's end says most
+        raise ValueError(f"unknown robot {shown!r}; known: {', '.join(ROBOTS)} (bigcbf/robots.py), or a "
                          "robot folder's path (D/<D>.xml and D/scene.xml)")
     return name
 

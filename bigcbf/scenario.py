@@ -379,6 +379,21 @@ def parse_scenario(text: str, file: str | Path = "<text>", seed: int = 0) -> Sce
     return scenario_from_dict(parse_toml(text, str(file)), Path(file), seed)
 
 
+def _robot_folder_near_file(raw: dict, path: Path) -> None:
+    """A relative ``[robot] model`` that is not a registered robot names a robot folder relative to the scenario
+    file's folder, as a relative ``robot_profile_base`` does (not to the working directory, so one file means one
+    robot wherever it is run from): rewritten in ``raw`` to that path, which RobotSpec then checks (an unknown
+    robot's message names the path it looked at). A bare name that is no folder beside the file is left as it is:
+    a registered robot's name mistyped, which RobotSpec reports with the known names."""
+    rob = raw.get("robot")
+    model = rob.get("model") if isinstance(rob, dict) else None
+    if not isinstance(model, str) or model in robots.ROBOTS or not model.strip() or Path(model).is_absolute():
+        return
+    near = path.parent / model
+    if len(Path(model).parts) > 1 or model.startswith(".") or robots.robot_folder_path(str(near)) is not None:
+        rob["model"] = str(near)
+
+
 def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_text: str | None = None) -> Scenario:
     """The Scenario of a scenario file's parsed TOML ``raw`` (read from ``path``), drawn for ``seed``."""
     for reserved in ("file", "seed", "dynamic"):
@@ -395,6 +410,7 @@ def scenario_from_dict(raw: dict, path: Path, seed: int = 0, *, robot_profile_te
     draws_as = raw.pop("draws_as", name)
     if not isinstance(draws_as, str) or not draws_as:
         raise UserError("expected a scenario name (a non-empty string)", file=str(path), field="draws_as")
+    _robot_folder_near_file(raw, path)
     base_ref = raw.pop("robot_profile_base", default_profile(raw))
     if not isinstance(base_ref, str):
         raise UserError("expected a string (a shipped profile's name or a .toml path)", file=str(path),

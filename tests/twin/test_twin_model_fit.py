@@ -164,3 +164,30 @@ def test_run_takes_a_fitted_robot_folder(tmp_path, capsys):
     from bigcbf.sim.scene import SceneSpec, build_model       # the scene such an episode composes: the folder's
     m = build_model(SceneSpec(robot=str(folder)))                # floor friction
     assert m.geom_friction[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0] == pytest.approx(0.6)
+
+
+def test_robot_folder_path_relative_to_the_scenario_file(tmp_path, monkeypatch):
+    """A relative [robot] model names a robot folder relative to the scenario file's folder (as a relative
+    robot_profile_base does), not to the working directory: the same file loads from any directory, and a path
+    that is not there is one UserError naming the file, the field and the path it looked at."""
+    import tomli_w
+
+    from bigcbf.params.toml_io import load_toml
+    from bigcbf.scenario import load_scenario, resolve_path
+    scenes = tmp_path / "scenes"
+    mf.write_robot_folder(mf.model_with("rosmaster_x3", {}), scenes / "robots" / "my_x3")
+    raw = load_toml(resolve_path("required_sidestepping"))
+    raw["robot"]["model"] = "robots/my_x3"
+    scen = scenes / "scen.toml"
+    scen.write_bytes(tomli_w.dumps(raw).encode())
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    sc = load_scenario(str(scen))
+    assert Path(sc.robot.model).resolve() == (scenes / "robots" / "my_x3").resolve()
+    raw["robot"]["model"] = "robots/not_there"
+    scen.write_bytes(tomli_w.dumps(raw).encode())
+    with pytest.raises(UserError) as err:
+        load_scenario(str(scen))
+    msg = str(err.value)
+    assert "\n" not in msg and str(scen) in msg and "model" in msg and "scenes/robots/not_there" in msg
