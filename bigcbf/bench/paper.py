@@ -102,6 +102,41 @@ HARDWARE_SCENARIO_ORDER = ("lab_required_sidestepping", "lab_static_clutter", "l
 PAPER_SEEDS = 50
 
 
+def paper_successes(pct: float, n: int) -> int:
+    """The paper's successes out of its n episodes from the percentage it prints (Table II: k/450 to two decimals,
+    e.g. 68.67 % -> 309; the text's per-scene figures: k/50 as whole percents)."""
+    return int(round(pct * n / 100.0))
+
+
+def paper_tests(per_method: dict, per_scene: dict, methods, scenes) -> dict:
+    """Each method's success against the paper's by a two-sample test (issue 24): overall (ours: all our episodes
+    of the nine; the paper's: Table II's rate of 450) and in each scene of ``scenes`` whose rate the paper's text
+    quotes (its 50 episodes). Per method ``{"overall": stats.two_sample_difference(...), "scenes": {scene: ...}}``:
+    ours minus the paper's in percentage points, Newcombe's 95 % interval, Fisher's exact p."""
+    from .stats import two_sample_difference
+
+    def ours(s: dict) -> tuple[int, int]:
+        n = int(s.get("ok") or 0)
+        return (int(round(s["success_pct"] * n / 100.0)) if n and s.get("success_pct") is not None else 0), n
+
+    out = {}
+    for m in methods:
+        if m not in PAPER_TABLE_II or m not in per_method:
+            continue
+        k, n = ours(per_method[m])
+        n_paper = PAPER_SEEDS * len(SCENARIO_ORDER)
+        row = {"overall": two_sample_difference(k, n, paper_successes(PAPER_TABLE_II[m]["success_pct"], n_paper),
+                                                n_paper), "scenes": {}}
+        for sc in scenes:
+            theirs = PAPER_SCENARIO_SUCCESS.get(sc, {}).get(m)
+            if theirs is None or sc not in per_scene.get(m, {}):
+                continue
+            ks, ns = ours(per_scene[m][sc])
+            row["scenes"][sc] = two_sample_difference(ks, ns, paper_successes(theirs, PAPER_SEEDS), PAPER_SEEDS)
+        out[m] = row
+    return out
+
+
 def shipped_scene_keys(names) -> dict[str, str]:
     """The bench's scenario key (:func:`bigcbf.bench.tasks.scenario_key`: the file's text and its base robot
     profile's text) of each shipped scene among ``names``: a bench row whose ``scenario_sha`` equals it ran that very

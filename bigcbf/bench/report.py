@@ -69,8 +69,8 @@ from typing import Iterable, Sequence
 from ..errors import UserError
 from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
 from .stats import fmt_ci, paired_difference, paired_ratio_difference, ratio_ci_pct, wilson_pct
-from .paper import (METHOD_ORDER, comparability, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
-                    TABLE2_KEYS, ordered)
+from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
+                    TABLE2_KEYS, comparability, ordered, paper_tests)
 from .paper import display as _method_display
 from .variants import arm_label, combination_label, split_label
 
@@ -264,6 +264,9 @@ def build_summary(rows: Sequence[dict], methods: Sequence[str], scenarios: Seque
                            for r in rows if r["status"] == "error"],
         **extra,
     }
+    comp = summary["paper"]["comparable"]
+    if comp["table_ii"]["comparable"]:
+        summary["paper"]["tests"] = paper_tests(summary["methods"], summary["by_scenario"], methods, comp["scenes"])
     if variants:
         summary["variants"] = variant_summary(rows, base_methods, variants, summary["methods"])
     return summary
@@ -673,6 +676,20 @@ def _table_ii_lines(summary: dict, methods: Sequence[str], scenarios: Sequence[s
         lines += _table(["Method"] + [s.replace("_", " ") for s in quoted],
                         ([display(m)] + [f"{_f(per_ms[m][s]['success_pct'], 0)} / {_f(pss[s].get(m), 0)}"
                                          for s in quoted] for m in methods))
+    tests = summary["paper"].get("tests")
+    if tests:
+        def cell(t):
+            if t is None or t["diff_pct"] is None:
+                return "–"
+            mark = " *" if t["fisher_p"] < 0.05 else ""
+            return (f"{t['diff_pct']:+.1f} [{t['ci95_pct'][0]:+.1f}, {t['ci95_pct'][1]:+.1f}] "
+                    f"p {t['fisher_p']:.2g}{mark}")
+        lines += ["", "Success against the paper's, two-sample tests: ours minus the paper's in percentage points, "
+                      "Newcombe's 95 % interval for independent proportions, Fisher's exact two-sided p; * where "
+                      "p < 0.05 (overall: our episodes of the nine vs the paper's 450; per scene: vs its 50).", ""]
+        lines += _table(["Method", "Overall"] + [s.replace("_", " ") for s in quoted],
+                        ([display(m), cell(tests[m]["overall"])] + [cell(tests[m]["scenes"].get(s)) for s in quoted]
+                         for m in methods if m in tests))
     return lines
 
 

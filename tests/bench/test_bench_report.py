@@ -148,9 +148,16 @@ def test_the_paper_is_shown_only_beside_its_own_benchmark(case, why):
     if why is None:
         assert verdict == {"comparable": True, "why": ""}
         assert "| BIG-CBF | 100.00 / 99.78 |" in md and "100 / 98" in md      # Table II; corridor meeting's quote
+        # the two-sample tests against the paper: 450/450 vs its 449/450; corridor meeting 50/50 vs its 49/50
+        t = s["paper"]["tests"]["big-cbf"]
+        assert (t["overall"]["k1"], t["overall"]["n1"], t["overall"]["k2"], t["overall"]["n2"]) == (450, 450, 449, 450)
+        assert t["overall"]["diff_pct"] == 0.22 and t["overall"]["fisher_p"] == pytest.approx(1.0)
+        assert t["scenes"]["corridor_meeting"]["k2"] == 49 and set(t["scenes"]) == set(s["paper"]["comparable"]["scenes"])
+        assert "Success against the paper's, two-sample tests" in md and "| BIG-CBF | +0.2 [" in md
     else:
         assert not verdict["comparable"] and why in verdict["why"]
         assert "99.78" not in md and why in md
+        assert "tests" not in s["paper"] and "two-sample tests" not in md
         # the per-scene figures the paper quotes: beside each shipped scene run at 50 seeds with the defaults
         quoted = s["paper"]["comparable"]["scenes"]
         assert quoted == {"edited": ["multi_static_clutter", "required_sidestepping"], "seeds": [], "config": [],
