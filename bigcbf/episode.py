@@ -394,7 +394,7 @@ class Episode:
         before = None
         while nxt > 0 and not self._collision:
             nb = min(nxt, w.BLOCK_STEPS)
-            before = w.true_state(), self.walkers.velocities.copy()     # the velocities a contact is judged by
+            before = w.snapshot(), self.walkers.velocities.copy()       # the velocities a contact is judged by
             w.step(nb)
             self._k += nb
             nxt -= nb
@@ -404,7 +404,7 @@ class Episode:
         if self._collision:
             self.done = True
             if before is not None:
-                self._classify_contact(*before)
+                self._classify_contact(w.true_state(before[0]), before[1])
 
     def _classify_contact(self, ts: RobotState, ped_v: np.ndarray) -> None:
         """The contact just made, classified by who moved into whom (sim/contacts.py) with the robot's and the

@@ -150,7 +150,21 @@ class WheelOdometry:
 
     def __init__(self, kin: MecanumKinematics, x: float = 0.0, y: float = 0.0, theta: float = 0.0):
         self.kin = kin
+        # MecanumKinematics.forward's constants, for the same arithmetic in plain floats (_forward); None: another
+        # kinematics class, whose own forward is called
+        self._fk = ((kin.rolling_radius_m, kin.half_wheelbase_m + kin.half_track_m,
+                     *(float(e) for e in kin.effective_scale)) if type(kin) is MecanumKinematics else None)
         self.reset(x, y, theta)
+
+    def _forward(self, w) -> np.ndarray:
+        """``self.kin.forward(w)``: for MecanumKinematics the same operations in the same order on Python floats
+        (the same bits, without numpy's per-scalar overhead: this runs twice per physics block)."""
+        if self._fk is None:
+            return self.kin.forward(w)
+        r, k, ex, ey, ez = self._fk
+        w0, w1, w2, w3 = np.asarray(w, float).tolist()
+        return np.array([ex * (r * (w0 + w1 + w2 + w3) / 4.0), ey * (r * (-w0 + w1 + w2 - w3) / 4.0),
+                         ez * (r * (-w0 + w1 - w2 + w3) / (4.0 * k))])
 
     def reset(self, x: float, y: float, theta: float) -> None:
         self.x, self.y, self.theta = float(x), float(y), float(theta)
@@ -159,11 +173,11 @@ class WheelOdometry:
     def update(self, wheel_speeds, dt: float, gyro_z: float | None = None, measured=None) -> None:
         """Integrate over dt with the wheel speeds (and yaw rate) ``wheel_speeds`` (e.g. the mean over dt, for a
         trapezoidal step); the reported twist is that of ``measured`` (the latest reading; default: the same)."""
-        twist = self.kin.forward(wheel_speeds)
+        twist = self._forward(wheel_speeds)
         if gyro_z is not None:
             twist[2] = gyro_z
-        vx, vy, wz = (float(x) for x in twist)
-        self.twist = twist if measured is None else self.kin.forward(measured)
+        vx, vy, wz = twist.tolist()
+        self.twist = twist if measured is None else self._forward(measured)
         if gyro_z is not None:
             self.twist[2] = gyro_z
         mid = self.theta + 0.5 * wz * dt          # midpoint heading (second order)

@@ -22,6 +22,7 @@ another's draws, and with none set nothing is drawn.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -70,6 +71,7 @@ class Pedestrians:
         self.params = params
         self.robot_radius = robot_radius
         self._A: tuple[np.ndarray, np.ndarray] | None = None      # (:meth:`_strengths`)
+        self._xy: list[list[list[float]]] | None = None           # the waypoints as floats (:meth:`_desired`)
         self.p = np.array([p[0] for p in self.paths]).reshape(-1, 2)
         self.v = np.zeros((self.k, 2))
         self.target = np.ones(self.k, int)
@@ -94,13 +96,20 @@ class Pedestrians:
         self.faulty = any(x is not None for x in self._stops + self._turns)
 
     def _desired(self, t: float) -> np.ndarray:
+        """(k, 2) the preferred velocities v0_i e_i at t (advancing the waypoints reached). In plain floats: the
+        numpy form's operations on two-vectors (|d| = sqrt(dx dx + dy dy), as numpy's 2-norm computes it), the
+        same bits at a fraction of the cost."""
         e = np.zeros((self.k, 2))
-        for i in range(self.k):
+        tol = self.params.waypoint_tol_m
+        if self._xy is None:
+            self._xy = [p.tolist() for p in self.paths]
+        for i, (px, py) in enumerate(self.p.tolist()):
             if t < self.t0[i] or self.done[i]:
                 continue
-            path = self.paths[i]
-            d = path[self.target[i]] - self.p[i]
-            if np.linalg.norm(d) < self.params.waypoint_tol_m:
+            path = self._xy[i]
+            tx, ty = path[self.target[i]]
+            dx, dy = tx - px, ty - py
+            if math.sqrt(dx * dx + dy * dy) < tol:
                 if self.target[i] + 1 < len(path):
                     self.target[i] += 1
                 elif self.loop[i]:
@@ -108,8 +117,10 @@ class Pedestrians:
                 else:
                     self.done[i] = True
                     continue
-                d = path[self.target[i]] - self.p[i]
-            e[i] = d / max(np.linalg.norm(d), 1e-9)
+                tx, ty = path[self.target[i]]
+                dx, dy = tx - px, ty - py
+            n = max(math.sqrt(dx * dx + dy * dy), 1e-9)
+            e[i] = (dx / n, dy / n)
             if self.faulty:
                 e[i] = self._faulted(i, t, e[i])
         return e * self.v0[:, None]

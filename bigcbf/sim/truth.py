@@ -230,6 +230,12 @@ class Clearance:
         obstacles are measured exactly nearest first, and only while their lower bound can still beat the best.
         ``below``: a caller that needs the value only when it is below this (a running minimum) gets, otherwise,
         some value >= below; the exact minimum whenever it is below."""
+        return self.bounded(pose, ped_p, below)[0]
+
+    def bounded(self, pose, ped_p: np.ndarray, below: float = math.inf) -> tuple[float, float]:
+        """(``self(pose, ped_p, below)``, a lower bound on the exact minimum): the value itself when it is exact,
+        else what the pruning proved (every obstacle not measured is at least that far). The bound holds where
+        it is >= 0 (the centre-distance bounds assume the bodies apart; a deep overlap can be deeper)."""
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         o = self.outline
         outer, inner = o.outer_radius, o.inner_radius
@@ -241,10 +247,10 @@ class Clearance:
             if len(c):
                 groups.append((c, np.hypot(c[:, 0] - x, c[:, 1] - y) - r, r))
         if not groups:
-            return math.inf
+            return math.inf, math.inf
         lowest = min(float(d.min()) for _, d, _ in groups)
         if lowest - outer >= below:                  # everything surely at least `below` away
-            return lowest - outer
+            return lowest - outer, lowest - outer
         limit = min(below, lowest - inner) + outer   # no obstacle farther than this (centre distance) matters
         candidates = sorted((float(d[i]), g, i) for g, (_, d, _) in enumerate(groups)
                             for i in np.flatnonzero(d <= limit).tolist())
@@ -264,7 +270,7 @@ class Clearance:
                 qx, qy = abs(cs * px + sn * py) - o.half_x, abs(cs * py - sn * px) - o.half_y
                 v = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0) - float(r[i])
             best = min(best, v)
-        return best
+        return best, min(best, limit - outer)       # those not measured: beyond `limit` or behind the break
 
 
 class GroundTruth:
@@ -282,6 +288,11 @@ class GroundTruth:
         base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base_link")
         self.robot_geom = body_root == base
         self.obstacle_geom = (~self.robot_geom) & (model.geom_group >= 1) & (model.geom_group <= 2)
+        # (geom a, geom b) -> robot against obstacle, either way round: one look-up per contact in in_contact
+        pair = self.robot_geom[:, None] & self.obstacle_geom[None, :]
+        self._contact_pair = pair | pair.T
+        self._outer = self.outline.outer_radius
+        self._anchor: tuple[float, float, float, np.ndarray, float] | None = None    # (clearance)
 
     def obstacles(self, p, ped_p: np.ndarray, ped_v: np.ndarray) -> Obstacles:
         """Truth-mode obstacle estimates (debugging and ablations only, flagged as such): pedestrians and
@@ -293,17 +304,37 @@ class GroundTruth:
         return ground_truth_obstacles(np.asarray(p, float), centers, vels, radii, segments=self.segments,
                                       static=static)
 
+    #: slack [m] on the motion bound of ``clearance`` for the rounding of the distances (about 1e-15 m)
+    BOUND_SLACK_M = 1e-9
+
     def clearance(self, pose, ped_p: np.ndarray, below: float = math.inf) -> float:
         """The signed distance [m] between the robot's outline at its true pose (x, y, yaw) and the nearest
-        obstacle (``Clearance``; ``below`` as there); < 0 is a penetration, i.e. a contact."""
-        return self.distance(pose, ped_p, below)
+        obstacle (``Clearance``; ``below`` as there); < 0 is a penetration, i.e. a contact.
+
+        Between measurements nothing is measured while a bound proves the value is not below ``below``: the
+        signed distance between two bodies changes by at most how far their points move, so from the last
+        measurement's lower bound L (at pose and pedestrians p0, q0) it is now at least L - (|p - p0| +
+        outer_radius |yaw - yaw0| + max_j |q_j - q0_j|) (every point of the outline moves at most |p - p0| +
+        outer_radius |yaw - yaw0|); when that is >= ``below`` and >= 0 (bodies apart all along) this returns it
+        (a value >= ``below``, as ``Clearance`` may), otherwise it measures. The episode's running minimum is the
+        same number either way, and most physics blocks, away from the closest approach, need no measurement."""
+        x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
+        ped_p = np.asarray(ped_p, float).reshape(-1, 2)
+        a = self._anchor
+        if a is not None and below < math.inf and a[3].shape == ped_p.shape:
+            moved = math.hypot(x - a[0], y - a[1]) + self._outer * abs(yaw - a[2])
+            if len(ped_p):      # |q - q0| <= sqrt(2) max(|dx|, |dy|)
+                moved += 1.4142135623730951 * float(np.abs(ped_p - a[3]).max())
+            bound = a[4] - moved - self.BOUND_SLACK_M
+            if bound >= below and bound >= 0.0:
+                return bound
+        value, lower = self.distance.bounded((x, y, yaw), ped_p, below)
+        self._anchor = (x, y, yaw, ped_p.copy(), lower)
+        return value
 
     def in_contact(self, data: mujoco.MjData) -> bool:
         """Physical contact between the robot and any obstacle, wall or pedestrian (MuJoCo's contacts)."""
-        n = data.ncon
-        if n == 0:
+        if data.ncon == 0:
             return False
-        g = data.contact.geom[:n]
-        a, b = g[:, 0], g[:, 1]
-        hit = (self.robot_geom[a] & self.obstacle_geom[b]) | (self.robot_geom[b] & self.obstacle_geom[a])
-        return bool(hit.any())
+        c = data.contact                    # (ncon contacts)
+        return bool(self._contact_pair[c.geom1, c.geom2].any())

@@ -137,7 +137,7 @@ class SimWorld:
             nxt = imp.next_apply_time()
             if nxt is not None:                        # stop the block where the next command takes effect
                 nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
-            w0, g0 = d.qvel[self._wheel_dof].copy(), float(d.sensordata[self._imu_gyro + 2])
+            w0, g0 = d.qvel[self._wheel_dof], float(d.sensordata[self._imu_gyro + 2])     # (an index copy)
             try:
                 mujoco.mj_step(m, d, nb)
             except mujoco.FatalError as exc:           # the scene asks more of the simulator than it can hold
@@ -168,14 +168,22 @@ class SimWorld:
         """Odometry: body velocity from the wheel speeds, heading from the IMU gyro (see WheelOdometry)."""
         return self.odometry.state()
 
-    def true_state(self) -> RobotState:
-        """Ground truth from the simulator: pose in the world (= odom at start), body twist."""
+    def true_state(self, snapshot: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> RobotState:
+        """Ground truth from the simulator: pose in the world (= odom at start), body twist; of the moment a
+        ``snapshot()`` was taken when one is given (the same numbers ``true_state()`` gave then)."""
         d, q, v = self.data, self._qadr, self._vadr
-        R = d.xmat[self._base].reshape(3, 3)
-        vb = R.T @ d.qvel[v:v + 3]
-        wb = R.T @ d.qvel[v + 3:v + 6]
-        return RobotState(float(d.qpos[q]), float(d.qpos[q + 1]), _yaw(d.qpos[q + 3:q + 7]),
+        xmat, qpos, qvel = (d.xmat[self._base], d.qpos, d.qvel) if snapshot is None else snapshot
+        R = xmat.reshape(3, 3)
+        vb = R.T @ qvel[v:v + 3]
+        wb = R.T @ qvel[v + 3:v + 6]
+        return RobotState(float(qpos[q]), float(qpos[q + 1]), _yaw(qpos[q + 3:q + 7]),
                           float(vb[0]), float(vb[1]), float(wb[2]))
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What ``true_state`` reads now, copied (a few microseconds: the episode keeps one per physics block and
+        turns it into a state only when a contact needs it)."""
+        d = self.data
+        return d.xmat[self._base].copy(), d.qpos.copy(), d.qvel.copy()
 
     def pose(self) -> tuple[float, float, float]:
         """The true planar pose (x [m], y [m], yaw [rad]) in the world (cheaper than ``true_state``)."""
