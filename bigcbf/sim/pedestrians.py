@@ -189,6 +189,28 @@ class Pedestrians:
         return np.sum((mag * w)[..., None] * n, axis=1)
 
     def step(self, t: float, dt: float, robot_xy=None) -> None:
+        """One semi-implicit Euler step of dt from t (module docstring): :meth:`step_reference`'s numbers, bit
+        for bit, with the forces, the integration and the speed cap in one compiled kernel (``_social_step``);
+        the exponentials stay numpy's (see :meth:`_repulsion`)."""
+        if self.k == 0:
+            return
+        pr = self.params
+        active = (t >= self.t0) & ~self.done
+        desired = self._desired(t)
+        A_peds, A_robot = self._strengths()
+        B = float(pr.B_m)
+        e_peds = np.exp(_repulsion_exponents(self.p, self.r, self.p, self.r, B)) if self.k > 1 else _NONE
+        if robot_xy is not None:
+            q = np.array(robot_xy, float).reshape(1, 2)
+            e_robot = np.exp(_repulsion_exponents(self.p, self.r, q, np.array([self.robot_radius]), B))
+        else:
+            q, e_robot = _NONE, _NONE
+        self.v, self.p = _social_step(desired, self.v, self.p, float(pr.tau_s), A_peds, e_peds, q, A_robot, e_robot,
+                                      float(dt), float(pr.max_speed_factor), self.v0, active, self.done,
+                                      float(pr.anisotropy))
+
+    def step_reference(self, t: float, dt: float, robot_xy=None) -> None:
+        """:meth:`step` in numpy (the reference the compiled step is checked against, bit for bit)."""
         if self.k == 0:
             return
         pr = self.params
@@ -244,6 +266,34 @@ def _repulsion_sum(p, v, q, A, e, lam):
                 sx, sy = sx + fx, sy + fy
         out[i, 0], out[i, 1] = sx, sy
     return out
+
+
+#: an empty (0, 0) array: "no such neighbours" for ``_social_step``
+_NONE = np.zeros((0, 0))
+
+
+@kernel
+def _social_step(desired, v, p, tau, A_peds, e_peds, q, A_robot, e_robot, dt, max_factor, v0, active, done, lam):
+    """(v, p) after one step (``Pedestrians.step_reference``'s operations in its order): a = (desired - v) / tau
+    + the pedestrians' repulsion (``_repulsion_sum`` over the pedestrians themselves when ``e_peds`` has any) +
+    the robot's (over the one row of ``q`` when ``e_robot`` has any); v + dt a capped at max_factor v0 (|v| as
+    numpy's 2-norm: sqrt(vx vx + vy vy)); zero for those not active and not done; p + dt v."""
+    k = p.shape[0]
+    a = (desired - v) / tau
+    if e_peds.shape[0] > 0:
+        a = a + _repulsion_sum(p, v, p, A_peds, e_peds, lam)
+    if e_robot.shape[0] > 0:
+        a = a + _repulsion_sum(p, v, q, A_robot, e_robot, lam)
+    v_new = v + dt * a
+    for i in range(k):
+        s = np.sqrt(v_new[i, 0] * v_new[i, 0] + v_new[i, 1] * v_new[i, 1])
+        f = min(1.0, (max_factor * v0[i]) / max(s, 1e-9))
+        v_new[i, 0] *= f
+        v_new[i, 1] *= f
+        if not active[i] and not done[i]:
+            v_new[i, 0] = 0.0
+            v_new[i, 1] = 0.0
+    return v_new, p + dt * v_new
 
 
 class WorldPedestrians:
