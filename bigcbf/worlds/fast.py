@@ -6,7 +6,10 @@ wall corner, the edge of an opening in a corridor's wall), so the robot sees the
 Timing: each walker is timed for a robot driving its straight path at a speed drawn per walker from 0.5-0.8 m/s
 (``TIMED_FOR_MPS``: the time limit's planning speed up to the top speed; no method's speed): a walker from the side
 crosses the robot's line where that robot would be, within +-0.5 s; a head-on one meets it; one from behind
-catches up with it (or follows it when not faster).
+catches up with it (or follows it when not faster). Head-on and overtaking walkers walk with their body on the
+robot's line (in a corridor leaving a passage of 0.8 m beside them). A corridor's walkers from the side come from a
+room behind either wall through an opening in it; the rooms are closed, so a robot that dodges into one can leave
+it only the way it came.
 
 A distance barrier cannot hold its safe set against a person who closes faster than the robot can move away, so
 some contacts here are passive (``bigcbf/sim/contacts.py`` classifies them). So that an avoidable contact is the
@@ -151,11 +154,20 @@ EVENTS = (("side", 0.3), ("pair", 0.25), ("head-on", 0.25), ("behind", 0.2))
 
 
 def _lane(rng, width: float, r: float) -> float:
-    """A head-on or overtaking walker's lateral offset in a corridor of ``width`` (either side of the centre line):
-    inside with 0.1 m to spare, leaving a passage of at least MIN_PASSAGE_M on its other side."""
+    """A head-on or overtaking walker's lateral offset in a corridor of ``width`` (either side of the centre line,
+    the robot's line): its body on the robot's line (offset at most r + 0.1 m, so it overlaps the robot's body
+    there by at least 0.15 m), leaving a passage of at least MIN_PASSAGE_M on its other side."""
     lo = max(0.0, MIN_PASSAGE_M + r - width / 2)
-    hi = width / 2 - r - 0.1
+    hi = min(width / 2 - r - 0.1, r + 0.1)
     return _side(rng) * _u(rng, lo, max(lo, hi))
+
+
+def _on_line(rng, goal: tuple, r: float, x_m: float, x_a: float, x_b: float) -> tuple:
+    """An open floor's head-on or overtaking walker's straight path from x = x_a to x = x_b: through the robot's
+    line at x_m, offset at most r + 0.1 m from it (its body on it), at a slope of up to 0.05."""
+    y_m = goal[1] * x_m / goal[0] + _u(rng, -(r + 0.1), r + 0.1)
+    slope = _u(rng, -0.05, 0.05)
+    return (x_a, y_m + slope * (x_a - x_m)), (x_b, y_m + slope * (x_b - x_m))
 
 
 def _stand_off(x_w: float, x_face: float, y_in: float, r: float, half: float, robot_x: float) -> float:
@@ -243,8 +255,10 @@ def _fast(rng: np.random.Generator) -> Draft:
             # opening's near edge hides it until it turns
             x0 = x_c + _u(rng, -1.0, 1.0) * (gap / 2 - r - 0.15)
             y_turn = min(max(y_turn, half + r + 0.15), half + depth - r - 0.75)
+            # ... and on into the room across, to stop at its far end, clear of the opening
+            x1 = x0 + _u(rng, -0.2, 0.2)
             path = [(x0 - _u(rng, 1.0, 2.5), s * (y_turn + _u(rng, 0.2, 0.6))), (x0, s * y_turn),
-                    (x0 + _u(rng, -0.2, 0.2), -s * (half + 1.0))]
+                    (x1, -s * (half + 1.0)), (x_c + 2.0, -s * (half + depth / 2))]
             where = f"through the opening at x {x0:.1f} m, from behind the wall"
         else:
             x0 = x_meet
@@ -262,7 +276,7 @@ def _fast(rng: np.random.Generator) -> Draft:
             where = f"from behind a {kind} at x {x0:.1f} m"
         # its centre crosses the robot's line at t_meet
         t0 = t_meet - (float(np.linalg.norm(np.subtract(path[1], path[0]))) + abs(path[1][1])) / v \
-            if len(path) == 3 else t_meet - abs(path[0][1]) / v
+            if corridor else t_meet - abs(path[0][1]) / v
         d.pedestrian(f"side{k}", path, v, t0, r, reactive)
         walkers.append((len(d.pedestrians) - 1, f"from the {'left' if s > 0 else 'right'} {where}", v, factor,
                         reactive, v_a))
@@ -292,10 +306,13 @@ def _fast(rng: np.random.Generator) -> Draft:
             r, factor, v, reactive, v_a = draw_walker()
             if corridor or rng.random() < 0.4:
                 # along the robot's lane from beyond the goal: seen once within the LiDAR's range
-                y = _lane(rng, width, r) if corridor else _u(rng, -0.6, 0.6)
                 x_m = _u(rng, 2.5, x_g - 1.0)
                 t_m = x_m / v_a + _u(rng, -TIMING_JITTER_S, TIMING_JITTER_S)
-                path = [(x_g + 4.0, y), (-back + 0.5, y + (0.0 if corridor else _u(rng, -0.5, 0.5)))]
+                if corridor:
+                    y = _lane(rng, width, r)
+                    path = [(x_g + 4.0, y), (-back + 0.5, y)]
+                else:
+                    path = list(_on_line(rng, d.goal, r, x_m, x_g + 4.0, -back + 0.5))
                 t0 = t_m - (x_g + 4.0 - x_m) / v
                 where = "along the robot's lane from beyond the goal"
             else:
@@ -319,12 +336,15 @@ def _fast(rng: np.random.Generator) -> Draft:
         else:
             k += 1
             r, factor, v, reactive, v_a = draw_walker()
-            y = _lane(rng, width, r) if corridor else _u(rng, -0.6, 0.6)
             x_s = -_u(rng, 2.5, 4.5)
             # catches up with a robot at v_a at x_m (never, at the robot's speed or slower: then it follows)
             x_m = _u(rng, 2.0, x_g - 1.5)
             t0 = x_m / v_a - (x_m - x_s) / v if v > v_a else _u(rng, 0.0, 2.0)
-            path = [(x_s, y), (x_g + 4.0, y + (0.0 if corridor else _u(rng, -0.5, 0.5)))]
+            if corridor:
+                y = _lane(rng, width, r)
+                path = [(x_s, y), (x_g + 4.0, y)]
+            else:
+                path = list(_on_line(rng, d.goal, r, x_m, x_s, x_g + 4.0))
             d.pedestrian(f"behind{k}", path, v, t0, r, reactive)
             walkers.append((len(d.pedestrians) - 1, f"from {-x_s:.1f} m behind the start", v, factor, reactive, v_a))
     described = []
@@ -366,14 +386,16 @@ FAMILIES.add(Family(
             "up to 1.5 m short of the goal, in a corridor at the opening; a pair's second walker +-0.5 s from the "
             "first, within 0.6 m); it turns straight at the line r + 0.15 m + (1.1-1.8 s) x its speed from it: in a "
             "corridor after coming 1-2.5 m along behind the wall in its room (turning at least r + 0.15 m beyond "
-            "the wall) to the opening; on open floor from where it stands behind an occluder with its inner edge "
-            "there: a box, a pillar (on the line of sight) or a wall corner (1/3 each)",
-            "head-on: in a corridor along a lane from beyond the goal, meeting that robot 2.5 m ahead up to 1 m "
-            "short of the goal, +-0.5 s; on open floor 40 % so, 60 % stepping out from behind an occluder 4 m "
-            "ahead up to 0.5 m short of the goal into the robot's lane when that robot is "
-            "2-4 m away (+-0.5 s), then walking at it",
-            "from behind: starts 2.5-4.5 m behind the robot, timed to catch it 2 m ahead up to 1.5 m short of the goal "
-            "(when faster than that robot; else 0-2 s in, following it)",
+            "the wall) to the opening, then on into the room across to stop at its far end; on open floor from "
+            "where it stands behind an occluder with its inner edge there: a box, a pillar (on the line of sight) "
+            "or a wall corner (1/3 each)",
+            "head-on: in a corridor along a lane from beyond the goal, its body on the robot's line (offset at "
+            "most r + 0.1 m, a passage of 0.8 m left beside it), meeting that robot 2.5 m ahead up to 1 m short of "
+            "the goal, +-0.5 s; on open floor 40 % so (through the robot's line there, slope up to 0.05), 60 % "
+            "stepping out from behind an occluder 4 m ahead up to 0.5 m short of the goal into the robot's lane "
+            "when that robot is 2-4 m away (+-0.5 s), then walking at it",
+            "from behind: on the robot's line as head-on ones, starts 2.5-4.5 m behind the robot, timed to catch "
+            "it 2 m ahead up to 1.5 m short of the goal (when faster than that robot; else 0-2 s in, following it)",
             f"checked: each walker within {LidarModel().range_max_m:g} m and unoccluded (walls, boxes, cylinders, "
             f"other walkers) for the last {VISIBLE_BEFORE_S:g} s before it can reach the robot's straight path, seen "
             f"from the robot on it at {PLAN_SPEED_MPS:g}-{V_MAX_MPS:g} m/s"),
