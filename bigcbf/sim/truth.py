@@ -166,6 +166,9 @@ def rect_rect_distance_one(ax: float, ay: float, ac: float, as_: float, ahx: flo
     return max(gap, 0.0)
 
 
+_NO_XY, _NO_R = np.zeros((0, 2)), np.zeros(0)
+
+
 class Clearance:
     """Signed distances between the robot's outline at a pose and a scene's obstacles (module docstring)."""
 
@@ -232,18 +235,21 @@ class Clearance:
         some value >= below; the exact minimum whenever it is below."""
         return self.bounded(pose, ped_p, below)[0]
 
-    def bounded(self, pose, ped_p: np.ndarray, below: float = math.inf) -> tuple[float, float]:
+    def bounded(self, pose, ped_p: np.ndarray, below: float = math.inf, static: bool = True,
+                pedestrians: bool = True) -> tuple[float, float]:
         """(``self(pose, ped_p, below)``, a lower bound on the exact minimum): the value itself when it is exact,
         else what the pruning proved (every obstacle not measured is at least that far). The bound holds where
-        it is >= 0 (the centre-distance bounds assume the bodies apart; a deep overlap can be deeper)."""
+        it is >= 0 (the centre-distance bounds assume the bodies apart; a deep overlap can be deeper).
+        ``static``, ``pedestrians``: False leaves those obstacles out (the minimum over the others)."""
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         o = self.outline
         outer, inner = o.outer_radius, o.inner_radius
         ped_p = np.asarray(ped_p, float).reshape(-1, 2)
         groups = []                                  # (centres or None for walls and boxes, distances, radii)
-        if len(self.rect_c):
+        if static and len(self.rect_c):
             groups.append((None, self.rect_distances(np.array([x, y])), None))
-        for c, r in ((self.circ_c, self.circ_r), (ped_p, self.ped_r)):
+        for c, r in ((self.circ_c, self.circ_r) if static else (_NO_XY, _NO_R),
+                     (ped_p, self.ped_r) if pedestrians else (_NO_XY, _NO_R)):
             if len(c):
                 groups.append((c, np.hypot(c[:, 0] - x, c[:, 1] - y) - r, r))
         if not groups:
@@ -292,7 +298,8 @@ class GroundTruth:
         pair = self.robot_geom[:, None] & self.obstacle_geom[None, :]
         self._contact_pair = pair | pair.T
         self._outer = self.outline.outer_radius
-        self._anchor: tuple[float, float, float, np.ndarray, float] | None = None    # (clearance)
+        self._anchor_static: tuple[float, float, float, float] | None = None        # (clearance)
+        self._anchor: tuple[float, float, float, np.ndarray, float] | None = None
 
     def obstacles(self, p, ped_p: np.ndarray, ped_v: np.ndarray) -> Obstacles:
         """Truth-mode obstacle estimates (debugging and ablations only, flagged as such): pedestrians and
@@ -316,21 +323,33 @@ class GroundTruth:
         measurement's lower bound L (at pose and pedestrians p0, q0) it is now at least L - (|p - p0| +
         outer_radius |yaw - yaw0| + max_j |q_j - q0_j|) (every point of the outline moves at most |p - p0| +
         outer_radius |yaw - yaw0|); when that is >= ``below`` and >= 0 (bodies apart all along) this returns it
-        (a value >= ``below``, as ``Clearance`` may), otherwise it measures. The episode's running minimum is the
-        same number either way, and most physics blocks, away from the closest approach, need no measurement."""
+        (a value >= ``below``, as ``Clearance`` may), otherwise it measures. The static obstacles (walls, boxes,
+        cylinders: their bound wears off with the robot's motion alone) and the pedestrians are bounded and
+        measured apart; the minimum of the two is ``Clearance``'s. The episode's running minimum is the same
+        number either way, and most physics blocks, away from the closest approach, need no measurement."""
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         ped_p = np.asarray(ped_p, float).reshape(-1, 2)
-        a = self._anchor
-        if a is not None and below < math.inf and a[3].shape == ped_p.shape:
-            moved = math.hypot(x - a[0], y - a[1]) + self._outer * abs(yaw - a[2])
-            if len(ped_p):      # |q - q0| <= sqrt(2) max(|dx|, |dy|)
-                moved += 1.4142135623730951 * float(np.abs(ped_p - a[3]).max())
-            bound = a[4] - moved - self.BOUND_SLACK_M
+        skip = below < math.inf
+        a = self._anchor_static
+        value = None
+        if skip and a is not None:
+            bound = a[3] - math.hypot(x - a[0], y - a[1]) - self._outer * abs(yaw - a[2]) - self.BOUND_SLACK_M
             if bound >= below and bound >= 0.0:
-                return bound
-        value, lower = self.distance.bounded((x, y, yaw), ped_p, below)
+                value = bound
+        if value is None:
+            value, lower = self.distance.bounded((x, y, yaw), ped_p, below, pedestrians=False)
+            self._anchor_static = (x, y, yaw, lower)
+        if not len(ped_p):
+            return value
+        a = self._anchor
+        if skip and a is not None and a[3].shape == ped_p.shape:      # |q - q0| <= sqrt(2) max(|dx|, |dy|)
+            bound = (a[4] - math.hypot(x - a[0], y - a[1]) - self._outer * abs(yaw - a[2])
+                     - 1.4142135623730951 * float(np.abs(ped_p - a[3]).max()) - self.BOUND_SLACK_M)
+            if bound >= below and bound >= 0.0:
+                return min(value, bound)
+        v, lower = self.distance.bounded((x, y, yaw), ped_p, below, static=False)
         self._anchor = (x, y, yaw, ped_p.copy(), lower)
-        return value
+        return min(value, v)
 
     def in_contact(self, data: mujoco.MjData) -> bool:
         """Physical contact between the robot and any obstacle, wall or pedestrian (MuJoCo's contacts)."""
