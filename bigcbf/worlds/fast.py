@@ -9,7 +9,8 @@ crosses the robot's line where that robot would be, within +-0.5 s; a head-on on
 catches up with it (or follows it when not faster). Head-on and overtaking walkers walk with their body on the
 robot's line (in a corridor leaving a passage of 0.8 m beside them). A corridor's walkers from the side come from a
 room behind either wall through an opening in it; the rooms are closed, so a robot that dodges into one can leave
-it only the way it came.
+it only the way it came, and reach back (away from the goal) only 0.3 m past the opening, so that they are no
+pocket toward the goal for a local planner to be trapped in (that is the traps family's test).
 
 A distance barrier cannot hold its safe set against a person who closes faster than the robot can move away, so
 some contacts here are passive (``bigcbf/sim/contacts.py`` classifies them). So that an avoidable contact is the
@@ -234,9 +235,10 @@ def _fast(rng: np.random.Generator) -> Draft:
             y_out = y + (depth if y > 0 else -depth)
             d.wall((-back, y), (x_c - gap / 2, y))
             d.wall((x_c + gap / 2, y), (x_g + 5.0, y))
+            x_end = x_c + gap / 2 + 0.3                          # no pocket reaching on toward the goal
             d.wall((x_c - 4.0, y), (x_c - 4.0, y_out))
-            d.wall((x_c - 4.0, y_out), (x_c + 2.5, y_out))
-            d.wall((x_c + 2.5, y_out), (x_c + 2.5, y))
+            d.wall((x_c - 4.0, y_out), (x_end, y_out))
+            d.wall((x_end, y_out), (x_end, y))
         else:
             d.wall((-back, y), (x_g + 5.0, y))
     walkers = []                                               # (draft index, description, timed-for speed)
@@ -255,10 +257,10 @@ def _fast(rng: np.random.Generator) -> Draft:
             # opening's near edge hides it until it turns
             x0 = x_c + _u(rng, -1.0, 1.0) * (gap / 2 - r - 0.15)
             y_turn = min(max(y_turn, half + r + 0.15), half + depth - r - 0.75)
-            # ... and on into the room across, to stop at its far end, clear of the opening
+            # ... and on into the room across, to stop at its end away from the goal, clear of the opening
             x1 = x0 + _u(rng, -0.2, 0.2)
             path = [(x0 - _u(rng, 1.0, 2.5), s * (y_turn + _u(rng, 0.2, 0.6))), (x0, s * y_turn),
-                    (x1, -s * (half + 1.0)), (x_c + 2.0, -s * (half + depth / 2))]
+                    (x1, -s * (half + 1.0)), (x_c - 3.0, -s * (half + depth / 2))]
             where = f"through the opening at x {x0:.1f} m, from behind the wall"
         else:
             x0 = x_meet
@@ -376,8 +378,8 @@ FAMILIES.add(Family(
            "before it can reach the robot's straight path, so an avoidable contact is the robot's.",
     ranges=("layout: corridor 2.0-3.0 m wide or open floor 6-8 m wide, 50/50; goal 8-11 m ahead; in a corridor "
             "with walkers from the side, an opening 1.4-2.4 m wide in both walls, 3.5 m ahead up to 2 m short of "
-            "the goal, into a room behind either wall (2-3 m deep, from 4 m before to 2.5 m past the opening's "
-            "centre)",
+            "the goal, into a room behind either wall (2-3 m deep, from 4 m before the opening's centre to 0.3 m "
+            "past its far edge)",
             "events: 1 or 2 (50/50; at most 3 walkers): from the side 30 %, a pair from both sides 25 %, head-on "
             "25 %, from behind 20 %",
             "walkers: 0.8-1.6 m/s (1.0-2.0 x v_max), radius 0.2-0.3 m, reactive 50/50; each timed for a robot "
@@ -386,9 +388,9 @@ FAMILIES.add(Family(
             "up to 1.5 m short of the goal, in a corridor at the opening; a pair's second walker +-0.5 s from the "
             "first, within 0.6 m); it turns straight at the line r + 0.15 m + (1.1-1.8 s) x its speed from it: in a "
             "corridor after coming 1-2.5 m along behind the wall in its room (turning at least r + 0.15 m beyond "
-            "the wall) to the opening, then on into the room across to stop at its far end; on open floor from "
-            "where it stands behind an occluder with its inner edge there: a box, a pillar (on the line of sight) "
-            "or a wall corner (1/3 each)",
+            "the wall) to the opening, then on into the room across to stop 3 m back from the opening's centre; on "
+            "open floor from where it stands behind an occluder with its inner edge there: a box, a pillar (on the "
+            "line of sight) or a wall corner (1/3 each)",
             "head-on: in a corridor along a lane from beyond the goal, its body on the robot's line (offset at "
             "most r + 0.1 m, a passage of 0.8 m left beside it), meeting that robot 2.5 m ahead up to 1 m short of "
             "the goal, +-0.5 s; on open floor 40 % so (through the robot's line there, slope up to 0.05), 60 % "
