@@ -207,6 +207,11 @@ def _occluder(rng, d: Draft, x_w: float, x_face: float, s: int, y_in: float, y0:
 
 
 def _fast(rng: np.random.Generator) -> Draft:
+    """One ``fast`` world drawn from ``rng`` (the family's ``ranges``): the layout, its occluders and the walkers'
+    events, timed for a robot speed drawn per walker.
+
+    Length: one world's random draws in their fixed order (each seed's world depends on that order); to be split
+    (issue 22)."""
     corridor = rng.random() < 0.5
     x_g = _u(rng, 8.0, 11.0)
     width = _u(rng, 2.0, 3.0) if corridor else _u(rng, 6.0, 8.0)
