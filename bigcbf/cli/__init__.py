@@ -74,14 +74,19 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse already printed the usage error
         return int(exc.code or 0)
+    from .run import flush_notes
+    flush_notes(False)
     try:
         status = int(args._run(args) or 0)
         sys.stdout.flush()               # a closed pipe shows here, inside the handlers below
+        flush_notes(status == 0)         # remarks after a success only: a failure's message stays one line
         return status
     except UserError as err:
+        flush_notes(False)
         print(f"bigcbf {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        flush_notes()
         print(f"bigcbf {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:

@@ -108,7 +108,7 @@ def config_from_args(args):
     from ..bench.variants import parse_variants
     from ..errors import UserError
     from .argtypes import MAX_SEED
-    from .run import stderr_note, with_route
+    from .run import config_note, with_route
 
     variants = parse_variants(args.variant)      # before the suite writes its worlds: a typo costs nothing
     if args.route is not None and any(name == "route" for name, _ in variants):
@@ -126,7 +126,7 @@ def config_from_args(args):
     bc = bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
                       workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
                       profile=args.profile, perception=args.perception, split=args.split,
-                      notes=stderr_note, variants=args.variant)
+                      notes=config_note, variants=args.variant)
     return replace(bc, config=with_route(bc.config, args.route))
 
 

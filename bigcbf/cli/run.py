@@ -53,6 +53,26 @@ def stderr_note(text: str) -> None:
     print(f"note: {text}", file=sys.stderr)
 
 
+#: remarks about the run configuration (``config_note``: the tuned defaults' provenance, a profile's unidentified
+#: axis), printed by ``cli.main`` once the command has ended without an error, so that a command that fails prints
+#: its one error line only
+PENDING_NOTES: list[str] = []
+
+
+def config_note(text: str) -> None:
+    """A remark about the configuration, kept until the command ends, then printed on stderr as ``note: ...``
+    unless the command failed (its error is then its only line)."""
+    PENDING_NOTES.append(text)
+
+
+def flush_notes(print_them: bool = True) -> None:
+    import sys
+    if print_them:
+        for text in PENDING_NOTES:
+            print(f"note: {text}", file=sys.stderr)
+    PENDING_NOTES.clear()
+
+
 def start_live(port: int):
     """A LiveWriter on 127.0.0.1:port, announced on stderr; UserError without foxglove-sdk or with a busy port."""
     import sys
@@ -111,7 +131,7 @@ def run(args) -> int:
     # before any work: no output onto an input (the scenario file, a profile) or onto the other output
     check_distinct({"scenario": scenario.file, "--config": args.config, "--profile": args.profile,
                     "--robot-profile": args.robot_profile}, {"--video": args.video, "--log": args.log})
-    config = with_route(load_config(args.config, args.profile, notes=stderr_note), args.route)
+    config = with_route(load_config(args.config, args.profile, notes=config_note), args.route)
     from ..sanity import describe, sensor_check
     for line in sensor_check(scenario.scene(), scenario.robot_profile.lidar, config.stack, scenario.robot_profile)[1]:
         stderr_note(line)                            # at the start: a sensor that cannot see the scene's obstacles

@@ -37,12 +37,12 @@ def run(args) -> int:
     from ..outputs import strict_json
     from ..ros2.cli_common import domain_id
     from ..ros2.transport import Node, import_cyclonedds
-    from .run import load_run_scenario, stderr_note
+    from .run import config_note, load_run_scenario
 
     import_cyclonedds()
     domain = domain_id(args)
     scenario = load_run_scenario(args.scenario, args.seed, args.robot_profile)
-    config = load_config(args.config, None, notes=stderr_note)
+    config = load_config(args.config, None, notes=config_note)
     from ..ros2.sim_node import TwinEpisode, TwinNode
 
     ep = TwinEpisode.from_config(scenario, None, args.seed, config, time_limit_s=args.time_limit)

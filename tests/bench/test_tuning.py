@@ -205,3 +205,24 @@ def test_write_shipped_needs_the_whole_protocol(tmp_path, monkeypatch):
     assert not any(p.exists() for p in dest.values())
     assert sorted(ship()) == sorted(dest.values())
     assert all(dest[n].read_text() == (out / n).read_text() for n in tuning.SHIPPED)
+
+
+def test_tuned_defaults_note_follows_a_success_only(tmp_path, capsys, monkeypatch):
+    """With a tuned file shipped, a command that fails prints its one error line and nothing else; one that
+    succeeds ends with the note naming the tuned defaults' provenance (cli.run.config_note)."""
+    from bigcbf import config
+    from bigcbf.cli import main
+    tuned = tmp_path / "tuned.toml"
+    tuned.write_text("# Provenance: grid grid.toml sha256 0123; code git abc\n[methods.cbf-only.stack]\n"
+                     "alpha_per_s = 2.0\n")
+    monkeypatch.setattr(config, "TUNED_PATH", tuned)
+    config.shipped_tuned.cache_clear()
+    try:
+        assert main(["run", "no_such_scenario", "--method", "cbf-only"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "error" in err[0] and "no_such_scenario" in err[0]
+        assert main(["run", "required_sidestepping", "--method", "cbf-only", "--time-limit", "0.5", "--json"]) == 0
+        err = capsys.readouterr().err
+        assert "note: method defaults: the tuned configuration tuned.toml (Provenance: grid grid.toml sha256 0123" in err
+    finally:
+        config.shipped_tuned.cache_clear()
