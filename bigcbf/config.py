@@ -54,7 +54,7 @@ from .errors import UserError
 from .params.perception import PerceptionParams
 from .params.stack import StackParams, default_stack_params
 from .params.toml_io import from_dict, load_toml, to_dict
-from .sim.pedestrians import SocialForceParams
+from .params.pedestrians import SocialForceParams
 
 TABLES = ("stack", "perception", "pedestrians", "methods", "route")
 

@@ -67,14 +67,17 @@ def run(args) -> int:
     domain = domain_id(args)                 # every option checked before the warm-up
     for opt in ("scan_topic", "odom_topic", "cmd_topic", "cmd_in_topic", "goal_topic"):
         check_topic(getattr(args, opt), "--" + opt.replace("_", "-"))
-    from ..params.stack import default_stack_params, load_stack_params
+    from ..api import load_config
     from ..ros2.filter_node import FilterNode, FilterOptions
-    from ..ros2.stack import SafetyStack
+    from ..ros2.stack import FILTER_ONLY, SafetyStack
+    from .run import config_note
 
-    params = default_stack_params()
-    if args.profile is not None:
-        params = load_stack_params(args.profile, base=params)
-    stack = SafetyStack(args.method, params, seed=args.seed)
+    # the run configuration every front door builds (the shipped tuned defaults included), so the node runs the
+    # method as `bigcbf run` and the bench do: its stack keys, its own parameters, the perception's
+    config = load_config(None, args.profile, notes=config_note)
+    method = None if args.method == FILTER_ONLY else args.method
+    stack = SafetyStack(args.method, config.stack_for(method), config.perception, seed=args.seed,
+                        method_params=None if method is None else config.method_params(method))
     warm = stack.warm_up()
     opts = FilterOptions(scan_topic=args.scan_topic, odom_topic=args.odom_topic, cmd_topic=args.cmd_topic,
                          cmd_in_topic=args.cmd_in_topic, goal_topic=args.goal_topic, goal=args.goal,

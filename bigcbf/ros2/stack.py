@@ -54,9 +54,9 @@ class SafetyStack:
     """Perception, a planner (``method``; :data:`FILTER_ONLY` for none) and the common CBF filter of ``params``."""
 
     def __init__(self, method: str, params: StackParams, perception_params: PerceptionParams = PerceptionParams(),
-                 seed: int = 0):
-        self.method, self.params = method, params
-        self.planner = None if method == FILTER_ONLY else make_planner(method, params)
+                 seed: int = 0, method_params=None):
+        self.method, self.params, self.method_params = method, params, method_params
+        self.planner = None if method == FILTER_ONLY else make_planner(method, params, method_params)
         if self.planner is not None:
             self.planner.reset(int(seed))
         self.cbf = CbfFilter(filter_params(self.planner, params))
@@ -121,7 +121,7 @@ class SafetyStack:
         ranges[170:190] = 1.5
         scan = LaserScan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / n, range_min=0.05,
                          range_max=12.0, ranges=ranges, frame_id="laser", time_increment=0.0, scan_time=0.1)
-        twin = SafetyStack(self.method, self.params, self.perception_params)
+        twin = SafetyStack(self.method, self.params, self.perception_params, method_params=self.method_params)
         twin.set_goal(3.0, 0.0)
         pose = RobotState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         for k in range(3):

@@ -23,33 +23,17 @@ another's draws, and with none set nothing is drawn.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from ..control.jit import kernel
-from ..params.checks import check_ranges, ranged
 from ..params.faults import EventSchedule, PedestrianTurn
+from ..params.pedestrians import SocialForceParams     # robot-side parameters (config reads them without sim)
 from .faults import EventProcess
 
 #: first element of the spawn key of the pedestrians' fault streams (SimWorld's streams have keys (k,))
 FAULT_STREAM_KEY = 1000
-
-
-@dataclass(frozen=True)
-class SocialForceParams:
-    tau_s: float = ranged(0.5, 0, 10, lo_open=True)  # relaxation time to the preferred velocity
-    A_mps2: float = ranged(2.0, 0, 100)  # pedestrian-pedestrian interaction strength
-    B_m: float = ranged(0.3, 0, 10, lo_open=True)  # interaction range
-    A_robot_mps2: float = ranged(1.0, 0, 100)  # pedestrian-robot strength (reactive pedestrians only)
-    anisotropy: float = ranged(0.35, 0, 1)  # lambda: weight of interactions from behind
-    waypoint_tol_m: float = ranged(0.15, 0, 10, lo_open=True)
-    max_speed_factor: float = ranged(1.3, 0, 10, lo_open=True)
-
-    def __post_init__(self):
-        check_ranges(self, positive=("tau_s", "B_m", "waypoint_tol_m", "max_speed_factor"),
-                     nonneg=("A_mps2", "A_robot_mps2"), unit=("anisotropy",))
 
 
 class Pedestrians:
