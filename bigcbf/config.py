@@ -221,5 +221,8 @@ def config_toml(config: RunConfig) -> str:
 
 
 def config_from_toml(text: str, *, file: str = "<run config>") -> RunConfig:
-    """Parse :func:`config_toml`'s text back (what a bench worker does with its task)."""
-    return run_config_from_dict(tomllib.loads(text), file=file)
+    """Parse :func:`config_toml`'s text back (what a bench worker does with its task). The text is the whole
+    configuration, so it is read over :func:`untuned`: a method without ``[methods.NAME.stack]`` in it has no stack
+    keys of its own, and a shipped tuned file cannot add its keys to a configuration that had none (a fixed point:
+    config_from_toml(config_toml(c)) == c)."""
+    return run_config_from_dict(tomllib.loads(text), file=file, base=untuned())

@@ -29,7 +29,7 @@ from .control.prediction import age_obstacles
 from .control.route import RouteLayer, RouteParams
 from .errors import UserError
 from .params.perception import PerceptionParams
-from .params.stack import StackParams, default_stack_params
+from .params.stack import StackParams
 from .perception.pipeline import Perception
 from .sanity import odometry_check, sensor_check
 from .scenario import Scenario
@@ -201,11 +201,12 @@ class Episode:
     or None for an episode whose u_in comes from outside (``act(u_in)``). ``method_params``: the method's own
     parameters (its ``params_type``; default its defaults). :meth:`from_config` takes them all from a RunConfig.
 
-    ``params``: the stack parameters; default (None) those of ``RunConfig()``, Table I overlaid with the
-    twin-calibrated stack profile of the simulated X3 (``default_stack_params()``), which every front door
-    (``bigcbf run``/``bench``/``demo``, :func:`bigcbf.run_episode`, the Gymnasium environment) builds from, so
+    ``params``: the stack parameters; default (None) those of ``RunConfig()`` for the method (Table I overlaid with
+    the twin-calibrated stack profile of the simulated X3, ``default_stack_params()``, with the method's keys of a
+    shipped tuned configuration), and then ``method_params`` None is ``RunConfig()``'s too: every front door
+    (``bigcbf run``/``bench``/``demo``, :func:`bigcbf.run_episode`, the Gymnasium environment) builds from it, so
     ``Episode(sc, m, seed)`` is ``Episode.from_config(sc, m, seed, RunConfig())``. Pass ``SIMULATION`` for Table I
-    alone (the golden tests and ``bigcbf perf`` do).
+    alone (the golden tests and ``bigcbf perf`` do; given ``params``, ``method_params`` None is the dataclass's).
     """
 
     @classmethod
@@ -224,7 +225,12 @@ class Episode:
                  route: RouteParams | None = None):
         if perception not in PERCEPTION_MODES:
             raise ValueError(f"perception must be one of {PERCEPTION_MODES}")
-        params = default_stack_params() if params is None else params      # RunConfig()'s stack
+        if params is None:          # RunConfig()'s stack for the method (and its parameters): the shipped defaults
+            from .config import RunConfig
+            default = RunConfig()
+            params = default.stack_for(method)
+            if method_params is None and method is not None:
+                method_params = default.method_params(method)
         self.scenario, self.method, self.seed, self.params = scenario, method, int(seed), params
         self.perception_mode = perception
         self.time_limit_s = scenario.time_limit_s if time_limit_s is None else float(time_limit_s)

@@ -24,14 +24,15 @@ def write(tmp_path, text, name="run.toml"):
 def test_tables_reach_their_dataclasses_and_defaults_stay(tmp_path):
     p = write(tmp_path, "[stack]\nalpha_per_s = 1.2\n[stack.uncertainty]\nkappa_img = 0.9\n"
                         "[perception]\ngate_chi2 = 8.0\n[pedestrians]\nA_robot_mps2 = 1.5\n[methods.dwa]\nn_xy = 7\n")
-    c = load_run_config(p)
+    from bigcbf.config import untuned
+    c = load_run_config(p, base=untuned())     # over the authors' defaults (a shipped tuned file sets dwa's weights)
     assert c.stack.alpha_per_s == 1.2 and c.stack.uncertainty.kappa_img == 0.9
     assert c.stack.T_C_s == SIMULATION.T_C_s and c.stack.uncertainty.d0_m == SIMULATION.uncertainty.d0_m
     assert c.perception.gate_chi2 == 8.0 and c.pedestrians.A_robot_mps2 == 1.5
     assert c.method_params("dwa") == DwaParams(n_xy=7) and c.method_params("apf") is not None
     assert c.method_params("big-cbf") is None
-    assert config_from_toml(config_toml(c)) == RunConfig(c.stack, c.perception, c.pedestrians,
-                                                         config_from_toml(config_toml(c)).methods)
+    back = config_from_toml(config_toml(c))
+    assert back == RunConfig(c.stack, c.perception, c.pedestrians, back.methods, method_stacks=c.method_stacks)
     assert config_toml(config_from_toml(config_toml(c))) == config_toml(c)         # a fixed point
 
 

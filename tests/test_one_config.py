@@ -74,9 +74,14 @@ def test_every_front_door_builds_the_same_configuration_and_the_same_episode(bui
     Episode(load_scenario(DEMO_SCENARIO, SEED), "big-cbf", SEED, time_limit_s=SECONDS)    # a bare Episode
 
     assert [m for m, _ in built] == ["big-cbf", "big-cbf", "big-cbf", None, "big-cbf"]
+    default = RunConfig()
     for method, cfg in built:
-        assert cfg.stack == RunConfig().stack
-        assert params_key(params_toml(cfg), "lidar") == want, method
+        assert cfg.stack == default.stack_for(method), method     # with a shipped tuned file: the method's keys
+        if method is not None:
+            assert cfg.method_params(method) == default.method_params(method), method
+        assert cfg.perception == default.perception and cfg.pedestrians == default.pedestrians
+        if not default.method_stacks:          # no tuned file: the whole configuration's key too
+            assert params_key(params_toml(cfg), "lidar") == want, method
     # one short real episode: the same result through the demo's code path, the API and the command line
     assert _deterministic(demo_metrics) == _deterministic(api_metrics) == _deterministic(cli_metrics)
     assert demo_metrics["sim_time_s"] == pytest.approx(SECONDS, abs=0.1) or demo_metrics["success"]
