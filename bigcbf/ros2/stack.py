@@ -127,4 +127,10 @@ class SafetyStack:
         for k in range(3):
             twin.scan(replace(scan, stamp=0.1 * k), pose)
             twin.control(0.1 * k, pose, None if twin.planner is not None else np.array([0.2, 0.0, 0.0]))
+        # then a blob that moves across the scan (a walker: the tracker's velocity, the moving obstacles' paths)
+        for k in range(3, 12):
+            moving = np.full(n, np.inf, np.float32)
+            moving[150 + 2 * k:160 + 2 * k] = 2.0
+            twin.scan(replace(scan, stamp=0.1 * k, ranges=moving), pose)
+            twin.control(0.1 * k, pose, None if twin.planner is not None else np.array([0.2, 0.0, 0.0]))
         return time.perf_counter() - t0
