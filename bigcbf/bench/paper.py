@@ -108,6 +108,12 @@ def paper_successes(pct: float, n: int) -> int:
     return int(round(pct * n / 100.0))
 
 
+def summary_successes(s: dict) -> tuple[int, int]:
+    """(successes, episodes) of a summary row (``report.summarize``: its success % of its ``ok`` episodes)."""
+    n = int(s.get("ok") or 0)
+    return (int(round(s["success_pct"] * n / 100.0)) if n and s.get("success_pct") is not None else 0), n
+
+
 def paper_tests(per_method: dict, per_scene: dict, methods, scenes) -> dict:
     """Each method's success against the paper's by a two-sample test (issue 24): overall (ours: all our episodes
     of the nine; the paper's: Table II's rate of 450) and in each scene of ``scenes`` whose rate the paper's text
@@ -115,15 +121,11 @@ def paper_tests(per_method: dict, per_scene: dict, methods, scenes) -> dict:
     ours minus the paper's in percentage points, Newcombe's 95 % interval, Fisher's exact p."""
     from .stats import two_sample_difference
 
-    def ours(s: dict) -> tuple[int, int]:
-        n = int(s.get("ok") or 0)
-        return (int(round(s["success_pct"] * n / 100.0)) if n and s.get("success_pct") is not None else 0), n
-
     out = {}
     for m in methods:
         if m not in PAPER_TABLE_II or m not in per_method:
             continue
-        k, n = ours(per_method[m])
+        k, n = summary_successes(per_method[m])
         n_paper = PAPER_SEEDS * len(SCENARIO_ORDER)
         row = {"overall": two_sample_difference(k, n, paper_successes(PAPER_TABLE_II[m]["success_pct"], n_paper),
                                                 n_paper), "scenes": {}}
@@ -131,7 +133,7 @@ def paper_tests(per_method: dict, per_scene: dict, methods, scenes) -> dict:
             theirs = PAPER_SCENARIO_SUCCESS.get(sc, {}).get(m)
             if theirs is None or sc not in per_scene.get(m, {}):
                 continue
-            ks, ns = ours(per_scene[m][sc])
+            ks, ns = summary_successes(per_scene[m][sc])
             row["scenes"][sc] = two_sample_difference(ks, ns, paper_successes(theirs, PAPER_SEEDS), PAPER_SEEDS)
         out[m] = row
     return out

@@ -70,7 +70,7 @@ from ..errors import UserError
 from ..outputs import atomic_output, check_output_dir, check_output_file, strict_json, write_text
 from .stats import fmt_ci, paired_difference, paired_ratio_difference, ratio_ci_pct, wilson_pct
 from .paper import (METHOD_ORDER, PAPER_SCENARIO_SUCCESS, PAPER_TABLE_II, PAPER_TABLE_III, SCENARIO_ORDER,
-                    TABLE2_KEYS, comparability, ordered, paper_tests)
+                    TABLE2_KEYS, comparability, ordered, paper_tests, summary_successes)
 from .paper import display as _method_display
 from .variants import arm_label, combination_label, split_label
 
@@ -638,8 +638,8 @@ def _table_iii_lines(summary: dict, methods: Sequence[str], h: str) -> list[str]
 
     def success(m):
         s, pp = per_m[m], paper.get(m, {})
-        k = round(s["success_pct"] * s["ok"] / 100) if s["success_pct"] is not None else None
-        ours = f"{k}/{s['ok']} ({_f(s['success_pct'], 1)})" if k is not None else "–"
+        ours = (f"{summary_successes(s)[0]}/{s['ok']} ({_f(s['success_pct'], 1)})" if s["success_pct"] is not None
+                else "–")
         theirs = f"{pp['successes']}/{pp['trials']} ({_f(pp['success_pct'], 1)})" if pp else "–"
         return f"{ours} / {theirs}"
     lines += _table(["Method", "Episodes", "Success (%)"] + [c for c, _ in cols],

@@ -69,15 +69,12 @@ def run(args) -> int:
         check_topic(getattr(args, opt), "--" + opt.replace("_", "-"))
     from ..api import load_config
     from ..ros2.filter_node import FilterNode, FilterOptions
-    from ..ros2.stack import FILTER_ONLY, SafetyStack
+    from ..ros2.stack import SafetyStack
     from .run import config_note
 
-    # the run configuration every front door builds (the shipped tuned defaults included), so the node runs the
-    # method as `bigcbf run` and the bench do: its stack keys, its own parameters, the perception's
-    config = load_config(None, args.profile, notes=config_note)
-    method = None if args.method == FILTER_ONLY else args.method
-    stack = SafetyStack(args.method, config.stack_for(method), config.perception, seed=args.seed,
-                        method_params=None if method is None else config.method_params(method))
+    # the run configuration every front door builds (the shipped tuned defaults included): the node runs the
+    # method as `bigcbf run` and the bench do
+    stack = SafetyStack.from_config(args.method, load_config(None, args.profile, notes=config_note), seed=args.seed)
     warm = stack.warm_up()
     opts = FilterOptions(scan_topic=args.scan_topic, odom_topic=args.odom_topic, cmd_topic=args.cmd_topic,
                          cmd_in_topic=args.cmd_in_topic, goal_topic=args.goal_topic, goal=args.goal,

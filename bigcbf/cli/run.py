@@ -66,10 +66,9 @@ def config_note(text: str) -> None:
 
 
 def flush_notes(print_them: bool = True) -> None:
-    import sys
     if print_them:
         for text in PENDING_NOTES:
-            print(f"note: {text}", file=sys.stderr)
+            stderr_note(text)
     PENDING_NOTES.clear()
 
 

@@ -67,6 +67,15 @@ class SafetyStack:
         self.scan_period_s = 0.1
         self.goal: np.ndarray | None = None
 
+    @classmethod
+    def from_config(cls, method: str, config, seed: int = 0) -> "SafetyStack":
+        """The stack of ``method`` (or :data:`FILTER_ONLY`) as a run configuration (``bigcbf.config.RunConfig``)
+        gives it to every front door: the method's stack keys and own parameters, the perception's (what
+        ``Episode.from_config`` takes)."""
+        m = None if method == FILTER_ONLY else method
+        return cls(method, config.stack_for(m), config.perception, seed=seed,
+                   method_params=None if m is None else config.method_params(m))
+
     def set_mount(self, x: float, y: float, yaw: float) -> None:
         """The laser's mount on the base (base_link -> the scan's frame, from /tf_static), used where the
         perception parameters keep the default mount (as ``bigcbf.robots`` does for the simulated robot)."""
@@ -124,13 +133,10 @@ class SafetyStack:
         twin = SafetyStack(self.method, self.params, self.perception_params, method_params=self.method_params)
         twin.set_goal(3.0, 0.0)
         pose = RobotState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        for k in range(3):
-            twin.scan(replace(scan, stamp=0.1 * k), pose)
-            twin.control(0.1 * k, pose, None if twin.planner is not None else np.array([0.2, 0.0, 0.0]))
-        # then a blob that moves across the scan (a walker: the tracker's velocity, the moving obstacles' paths)
-        for k in range(3, 12):
-            moving = np.full(n, np.inf, np.float32)
-            moving[150 + 2 * k:160 + 2 * k] = 2.0
-            twin.scan(replace(scan, stamp=0.1 * k, ranges=moving), pose)
+        for k in range(12):      # 3 scans of a still blob, then one moving across the scan (a walker's paths)
+            if k >= 3:
+                ranges = np.full(n, np.inf, np.float32)
+                ranges[150 + 2 * k:160 + 2 * k] = 2.0
+            twin.scan(replace(scan, stamp=0.1 * k, ranges=ranges), pose)
             twin.control(0.1 * k, pose, None if twin.planner is not None else np.array([0.2, 0.0, 0.0]))
         return time.perf_counter() - t0
