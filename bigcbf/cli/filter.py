@@ -18,7 +18,7 @@ def add_arguments(p):
                         "alone on /cmd_vel_in (a Nav2 controller upstream)")
     p.add_argument("--profile", type=path_arg, default=None, metavar="STACK.toml",
                    help="the stack's uncertainty profile, as 'bigcbf calibrate' writes it for the robot (default: "
-                        "Table I with the simulated X3's profile)")
+                        "Table I with the simulated X3's profile; the method's own keys: the shipped tuned configuration's)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the planner's random draws (default 0)")
     p.add_argument("--goal", type=_goal, default=None, metavar="X,Y",
                    help="the goal in the odom frame [m] (default: from /goal_pose)")
