@@ -105,6 +105,9 @@ class EpisodeResult:
     passive_collision: bool = False
     min_time_to_contact_s: float = float("inf")
     personal_space_s: float = 0.0
+    #: control steps whose distance rows held but not every velocity-aware row (StackParams.cbf_velocity_rows; the
+    #: filter's lexicographic fallback, bigcbf/control/cbf.py), as a fraction; 0 with the switch off
+    velocity_relaxed_ratio: float = 0.0
 
     def metrics(self) -> dict:
         d = asdict(self)
@@ -455,4 +458,4 @@ DETERMINISTIC_KEYS = ("success", "collision", "timeout", "time_s", "min_clearanc
                       "lateral_reversals", "no_progress_s", "encounters", "encounter_side_switches",
                       "switches_per_encounter", "e_cbf_infeasible", "m_img_mean_m", "m_img_p90_m",
                       "m_exec_mean_m", "m_exec_p90_m", "missed_scans", "contact", "at_fault_collision",
-                      "passive_collision", "min_time_to_contact_s", "personal_space_s")
+                      "passive_collision", "min_time_to_contact_s", "personal_space_s", "velocity_relaxed_ratio")

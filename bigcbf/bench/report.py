@@ -12,7 +12,9 @@ Aggregates (per method, and per method and scenario), over the episodes that ran
 - ``cbf_active_pct`` / ``qp_infeasible_pct``: 100 x control steps with an active constraint / an infeasible QP,
   over all control steps of all episodes of the group (the paper's "fraction of control steps");
   ``qp_infeasible_ci95_pct``: the latter's 95 % interval with the episode as the independent unit
-  (:func:`bigcbf.bench.stats.ratio_ci_pct`; None with fewer than two episodes).
+  (:func:`bigcbf.bench.stats.ratio_ci_pct`; None with fewer than two episodes). ``velocity_relaxed_pct``: 100 x
+  control steps whose distance rows held but not every velocity-aware row (the common filter's lexicographic
+  fallback, ``bigcbf/control/cbf.py``; 0 with the switch off; None for rows from before it was recorded).
 - ``cbf_active_episode_pct``: the mean over episodes of each episode's active ratio, x 100 (a long episode, e.g. a
   stalled timeout at 0 %, weighs as much as a short one; the pooled figure weighs episodes by their length).
 - ``e_cbf_infeasible_share_pct``: 100 x the E_CBF of control steps whose QP was infeasible / all E_CBF, summed over
@@ -115,6 +117,7 @@ def summarize(rows: Iterable[dict]) -> dict:
         "cbf_active_pct": 100.0 * active / steps if steps else None,
         "qp_infeasible_pct": 100.0 * infeasible / steps if steps else None,
         "qp_infeasible_ci95_pct": ratio_ci_pct(*_infeasible_steps(ok)),
+        "velocity_relaxed_pct": _step_pct([m for m in ok if "velocity_relaxed_ratio" in m], "velocity_relaxed_ratio"),
         "collisions": sum(bool(m["collision"]) for m in ok),
         "timeouts": sum(bool(m["timeout"]) for m in ok),
         **contact_figures(ok),
@@ -127,6 +130,12 @@ def summarize(rows: Iterable[dict]) -> dict:
         **{k: _mean([m.get(k) for m in ok]) for k in MARGIN_KEYS},
         **{k: _mean([m.get(k) for m in ok]) for k in LIVENESS_KEYS},
     }
+
+
+def _step_pct(ok: Sequence[dict], key: str) -> float | None:
+    """The pooled percentage of control steps of a per-episode step fraction ``key`` (None without episodes)."""
+    steps = sum(int(m["control_steps"]) for m in ok)
+    return 100.0 * sum(round(m[key] * m["control_steps"]) for m in ok) / steps if steps else None
 
 
 def _infeasible_steps(ok: Sequence[dict]) -> tuple[list[int], list[int]]:
@@ -286,7 +295,7 @@ def relabel(rows: Sequence[dict], methods: Sequence[str], variants: dict) -> tup
 VARIANT_FIGURES = ("ok", "success_pct", "success_ci95_pct", "collisions", "collision_pct", "collision_ci95_pct",
                    "at_fault_collisions", "at_fault_collision_pct", "at_fault_collision_ci95_pct",
                    "passive_collisions", "passive_collision_pct", "passive_collision_ci95_pct", "qp_infeasible_pct",
-                   "qp_infeasible_ci95_pct")
+                   "qp_infeasible_ci95_pct", "velocity_relaxed_pct")
 #: the episode outcomes whose paired differences between variants summary.json gives
 PAIRED_OUTCOMES = ("success", "collision", "at_fault_collision", "passive_collision")
 
@@ -541,7 +550,7 @@ def _variant_lines(summary: dict, h: str) -> list[str]:
     lines = [f"{h}# Variants: every method under each combination", "",
              f"Every method ran under every combination of {axes}, on the same scenes and seeds (rows above: "
              "`method [axis=value]`). Per method and combination:", ""]
-    cols = ["Success (%)", "Collisions", "At fault", "Passive", "QP infeas. (%)"]
+    cols = ["Success (%)", "Collisions", "At fault", "Passive", "QP infeas. (%)", "Cone relaxed (%)"]
     head = ["Method"] + [f"{c}: {col}" for c in short for col in cols]
     body = []
     for m, per in var["by_method"].items():
@@ -552,12 +561,13 @@ def _variant_lines(summary: dict, h: str) -> list[str]:
                     "–" if s["collisions"] is None or not s["ok"] else
                     f"{s['collisions']}: " + fmt_ci(s["collision_pct"], s["collision_ci95_pct"]),
                     _contact_cell(s, "at_fault"), _contact_cell(s, "passive"),
-                    fmt_ci(s["qp_infeasible_pct"], s["qp_infeasible_ci95_pct"], 2)]
+                    fmt_ci(s["qp_infeasible_pct"], s["qp_infeasible_ci95_pct"], 2), _f(s.get("velocity_relaxed_pct"))]
         body.append(row)
     lines += _table(head, body)
     lines += ["", "Each cell: n: % [95 % interval] (Wilson; success as % only). At fault / passive: contacts the robot "
               "drove into / did not (bigcbf/sim/contacts.py). QP infeas.: infeasible control steps / all control "
-              "steps, its interval from the spread between episodes (bigcbf/bench/stats.py).", "",
+              "steps, its interval from the spread between episodes (bigcbf/bench/stats.py). Cone relaxed: control steps whose "
+              "distance rows held but not every velocity-aware row (the filter's lexicographic fallback).", "",
               f"{h}# Variants: paired differences (each value vs the first, same method, scenes and seeds)", ""]
     body = []
     for m, entries in var["paired"].items():

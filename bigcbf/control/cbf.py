@@ -55,8 +55,15 @@ and its row violation measured.
 
 The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): every selected tracked obstacle
 that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same
-D_i^exec; the rows go through the same pre-check, QP and last resort. ``FilterInfo.rows`` names each counted row's
-obstacle, ``FilterInfo.n_velocity_rows`` how many of them are cone rows. With the switch off nothing of this runs.
+D_i^exec; the rows go through the same pre-check and QP. When that QP has no solution, the distance rows come
+first (lexicographically): the slack QP with only the velocity rows softened (``smallqp.solve_soft``) keeps every
+distance row exact and relaxes the cone rows by the least worst-case violation (fallback "velocity-relaxed",
+``FilterInfo.velocity_relaxed``; the step is not infeasible: the paper's QP, eq:hard_cbf_qp (26), held). Only when
+the distance rows and the box admit no command is the step infeasible, and then the slack QP over every row and
+the last resort decide as above. Without this order the switch could trade a distance row's violation for a cone
+row's (one shared slack): the paper's barrier would then hold less often with the switch on than off. ``FilterInfo
+.rows`` names each counted row's obstacle, ``FilterInfo.n_velocity_rows`` how many of them are cone rows. With the
+switch off nothing of this runs.
 
 Perception faults (``bigcbf.control.faults``): when an obstacle estimate has a NaN or an infinity anywhere (p, v,
 cov, r), or is implausible (a negative or absurd radius, a covariance that is not symmetric positive semi-definite
@@ -100,8 +107,8 @@ class FilterInfo:
 
     active: bool                 # the filter changed the (box-clipped) command: some CBF row was violated
     infeasible: bool             # the QP had no solution (least-violation or brake fallback used)
-    fallback: str | None         # None, "least-violation", "brake", "evade", "qp-retry", "invalid-input",
-    #                              "perception-fault"
+    fallback: str | None         # None, "least-violation", "brake", "evade", "passive", "velocity-relaxed",
+    #                              "qp-retry", "invalid-input", "perception-fault"
     solve_ms: float              # time of the whole filter call [ms]
     n_constraints: int           # CBF rows considered (when a QP ran: those left after dropping box-redundant rows)
     h_min: float                 # min_i h_i^exec over all obstacles [m^2] (+inf without obstacles)
@@ -111,6 +118,8 @@ class FilterInfo:
     #: of the counted rows, those of the velocity-aware barrier (StackParams.cbf_velocity_rows; its rows follow the
     #: distance rows in ``rows``)
     n_velocity_rows: int = 0
+    #: the distance rows held but not every velocity-aware row could (the lexicographic fallback; not infeasible)
+    velocity_relaxed: bool = False
     #: kappa_exec m_i (eq:shared_barrier: D_i - r_R - r_i - d0) [m] of the obstacles selected as CBF rows (before rows
     #: that hold over the whole actuator box are dropped)
     margins: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -424,7 +433,7 @@ class CbfFilter:
                 owner = np.concatenate((np.arange(M), own))
                 idx = np.concatenate((idx, M + np.arange(len(lv_), dtype=np.int64)))
         u, viol, active, C, lvec, idx, hopeless = _prepare(C_all, l_all, idx, u_in, self.lo, self.hi, FEAS_TOL)
-        infeasible = False
+        infeasible = velocity_relaxed = False
         if active:
             x = None if hopeless else self._solve_qp(C, lvec, u_in, cache=True)
             if x is not None:
@@ -432,11 +441,18 @@ class CbfFilter:
             if x is not None and viol <= 1e-6:
                 u = x
             else:
-                u, fallback, infeasible = self._infeasible(C, lvec, u_in, fallback)
-                if infeasible and self.params.cbf_last_resort != "slack":
-                    u, fallback = self._last_resort(state, obstacles, rows, C, lvec, idx, owner, u)
-                if not np.isfinite(u).all():
-                    u, fallback = np.zeros(3), "brake"
+                vel = idx >= len(rows.l)
+                relaxed = self._relax_velocity_rows(C, lvec, vel, u_in) if owner is not None and vel.any() else None
+                if relaxed is not None:        # t* <= FEAS_TOL: the solver had failed on a feasible problem
+                    u, t_star = relaxed
+                    velocity_relaxed = t_star > FEAS_TOL
+                    fallback = "velocity-relaxed" if velocity_relaxed else (fallback or "qp-retry")
+                else:
+                    u, fallback, infeasible = self._infeasible(C, lvec, u_in, fallback)
+                    if infeasible and self.params.cbf_last_resort != "slack":
+                        u, fallback = self._last_resort(state, obstacles, rows, C, lvec, idx, owner, u)
+                    if not np.isfinite(u).all():
+                        u, fallback = np.zeros(3), "brake"
                 u, viol = _clip_violation(C, lvec, u, self.lo, self.hi)
         h = rows.h
         n_vel = 0
@@ -446,8 +462,26 @@ class CbfFilter:
         info = FilterInfo(active=bool(active), infeasible=infeasible, fallback=fallback,
                           solve_ms=(time.perf_counter() - t0) * 1e3, n_constraints=len(lvec),
                           h_min=float(h.min()) if len(h) else math.inf, D=rows.D, max_violation=max(float(viol), 0.0),
-                          rows=idx, margins=margins, n_velocity_rows=n_vel)
+                          rows=idx, margins=margins, n_velocity_rows=n_vel, velocity_relaxed=velocity_relaxed)
         return u, info
+
+    def _relax_velocity_rows(self, C, lvec, soft, u_in) -> tuple[np.ndarray, float] | None:
+        """The lexicographic fallback of the velocity-aware barrier (module docstring): the distance rows hard, the
+        velocity rows (``soft``) relaxed by one shared slack (``smallqp.solve_soft``). (u, the velocity rows' largest
+        violation t*), or None when the distance rows and the box admit no command (then the step is infeasible and
+        the slack QP over every row decides)."""
+        status, x, _ = smallqp.solve_soft(C, lvec, soft.astype(np.float64), u_in, self.Hd, self.lo, self.hi,
+                                          SLACK_PENALTY)
+        if status != smallqp.OK or not np.isfinite(x).all():
+            return None
+        hard = ~soft
+        u, viol = _clip_violation(np.ascontiguousarray(C[hard]), np.ascontiguousarray(lvec[hard]), x, self.lo,
+                                  self.hi)
+        if viol > 1e-6:
+            return None
+        _, t_star = _clip_violation(np.ascontiguousarray(C[soft]), np.ascontiguousarray(lvec[soft]), u, self.lo,
+                                    self.hi)
+        return u, max(float(t_star), 0.0)
 
     def _velocity_rows(self, state: RobotState, obstacles: Obstacles, rows: CbfRows, idx: np.ndarray, u_in):
         """The collision-cone rows of the selected obstacles (``velocity_barrier.velocity_rows``), D_i^exec from

@@ -70,7 +70,8 @@ class EpisodeMetrics:
     - ``e_cbf``: ``eq:sim_cbf_energy`` (27) summed over the control steps with the fixed R_u;
       ``e_cbf_infeasible``: its part from steps whose hard QP was infeasible.
     - ``cbf_active_ratio``, ``qp_infeasible_ratio``: fractions of the control steps whose filter had an active
-      constraint / an infeasible QP (0 with no step).
+      constraint / an infeasible QP (0 with no step); ``velocity_relaxed_ratio``: of the steps whose distance rows
+      held but not every velocity-aware row (``FilterInfo.velocity_relaxed``; 0 with the switch off).
     - ``planner_p95_ms`` over the calls that ran a planning cycle (``PlanInfo.planned``), ``cbf_p95_ms`` over every
       filter call, ``perception_p95_ms`` over the scans processed: :func:`p95` (0 with no sample).
     - ``stopped_time_s``: simulated time whose last control step saw a true planar speed below ``v_freeze_mps``.
@@ -96,6 +97,7 @@ class EpisodeMetrics:
         self.e_cbf_infeasible = 0.0
         self.active = 0
         self.infeasible = 0
+        self.velocity_relaxed = 0
         self.perception_faults = 0
         self.missed_scans = 0
         self.stopped_s = 0.0
@@ -136,6 +138,7 @@ class EpisodeMetrics:
         self.e_cbf += e_step
         self.active += bool(filt.active)
         self.infeasible += bool(filt.infeasible)
+        self.velocity_relaxed += bool(getattr(filt, "velocity_relaxed", False))
         self.perception_faults += filt.fallback == PERCEPTION_FAULT
         if filt.infeasible:
             self.e_cbf_infeasible += e_step
@@ -187,4 +190,5 @@ class EpisodeMetrics:
             contact=None if self.contact is None else dict(self.contact),
             at_fault_collision=bool(self.contact is not None and self.contact["at_fault"]),
             passive_collision=bool(self.contact is not None and not self.contact["at_fault"]),
-            min_time_to_contact_s=self.min_ttc_s, personal_space_s=round(self.personal_space_s, 4))
+            min_time_to_contact_s=self.min_ttc_s, personal_space_s=round(self.personal_space_s, 4),
+            velocity_relaxed_ratio=self.velocity_relaxed / n)

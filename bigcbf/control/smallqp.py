@@ -5,7 +5,9 @@ normalized to C_i u >= l_i):
 
 - the hard QP: min_u (u - u_in)^T H (u - u_in) s.t. C u >= l, u_min <= u <= u_max (3 variables, H diagonal > 0);
 - its slack form, used when the hard QP is infeasible: min_(u, t) (u - u_in)^T H (u - u_in) + P t s.t.
-  C u + t >= l, u_min <= u <= u_max, t >= 0 (4 variables; t has no curvature).
+  C u + t >= l, u_min <= u <= u_max, t >= 0 (4 variables; t has no curvature);
+- the slack form with only some rows softened (``solve_soft``): C_i u + s_i t >= l_i with s_i in {0, 1}, the rows
+  with s_i = 0 hard (the filter's lexicographic fallback: the distance rows hard, the velocity-aware rows relaxed).
 
 The method keeps a set A of active constraints (linearly independent normals) and multipliers lambda_A >= 0 such
 that x minimizes the objective on {x: n_j^T x = b_j, j in A} (dual feasibility); it adds the most violated
@@ -19,8 +21,8 @@ it depends only on that set.
 
 Start points: the hard QP starts from x = u_in with A empty (the unconstrained minimum); the slack QP from
 (u_in, 0) with A = {t >= 0}, lambda = P (the minimum with t held at 0). With t's zero curvature the KKT systems
-stay nonsingular because A always holds a row or t >= 0 (the t-component of the stationarity condition,
-P = sum of the rows' multipliers + that of t >= 0, forbids dropping the last of them).
+stay nonsingular because A always holds a softened row or t >= 0 (the t-component of the stationarity condition,
+P = sum of the softened rows' multipliers + that of t >= 0, forbids dropping the last of them).
 
 Deterministic: plain double arithmetic in a fixed order (``bigcbf.control.jit``), Gaussian elimination with
 partial pivoting, ties broken by the lowest index; no thread, no alignment-dependent reduction. The tests compare
@@ -215,9 +217,10 @@ def gi_solve(Qd, g, N, b, x, act, lam, nact, max_iter):
 
 
 @kernel
-def _box_rows(C, l, lo, hi, slack):
+def _box_rows(C, l, lo, hi, slack, soft):
     """The constraint matrix N x >= b of the hard QP (slack False: x = u) or of the slack QP (x = (u, t)): the
-    rows, then u >= lo, -u >= -hi, then (slack) t >= 0."""
+    rows, then u >= lo, -u >= -hi, then (slack) t >= 0. In the slack QP, t enters row i with coefficient soft[i]
+    (1: the row may be violated by t; 0: the row is hard)."""
     n = C.shape[0]
     nv = 4 if slack else 3
     nc = n + 6 + (1 if slack else 0)
@@ -227,7 +230,7 @@ def _box_rows(C, l, lo, hi, slack):
         for j in range(3):
             N[i, j] = C[i, j]
         if slack:
-            N[i, 3] = 1.0
+            N[i, 3] = soft[i]
         b[i] = l[i]
     for j in range(3):
         N[n + j, j] = 1.0
@@ -243,7 +246,7 @@ def _box_rows(C, l, lo, hi, slack):
 @kernel
 def solve_hard(C, l, u_in, Hd, lo, hi):
     """eq:hard_cbf_qp (26): min (u - u_in)^T diag(Hd) (u - u_in) s.t. C u >= l, lo <= u <= hi. Returns (status, u)."""
-    N, b = _box_rows(C, l, lo, hi, False)
+    N, b = _box_rows(C, l, lo, hi, False, l)
     Qd = 2.0 * Hd
     g = -Qd * u_in
     x = u_in.copy()
@@ -257,8 +260,16 @@ def solve_hard(C, l, u_in, Hd, lo, hi):
 def solve_slack(C, l, u_in, Hd, lo, hi, penalty):
     """min (u - u_in)^T diag(Hd) (u - u_in) + penalty t s.t. C u + t >= l, lo <= u <= hi, t >= 0.
     Returns (status, u, t)."""
+    return solve_soft(C, l, np.ones(C.shape[0]), u_in, Hd, lo, hi, penalty)
+
+
+@kernel
+def solve_soft(C, l, soft, u_in, Hd, lo, hi, penalty):
+    """The slack QP with only some rows softened: min (u - u_in)^T diag(Hd) (u - u_in) + penalty t s.t.
+    C_i u + soft_i t >= l_i (soft_i 1: the row may be violated by t; 0: hard), lo <= u <= hi, t >= 0.
+    Status INFEASIBLE when the hard rows and the box admit no u. Returns (status, u, t)."""
     n = C.shape[0]
-    N, b = _box_rows(C, l, lo, hi, True)
+    N, b = _box_rows(C, l, lo, hi, True, soft)
     Qd = np.zeros(4)
     g = np.zeros(4)
     x = np.zeros(4)

@@ -23,9 +23,11 @@ N_PER_KIND = 400          # 2,400 problems
 _SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
 
 
-def proxsuite_qp(C, l, u_in, Hd, lo, hi, slack=False):
-    """The same problem solved by proxsuite's dense solver with tight tolerances: (solved, x)."""
+def proxsuite_qp(C, l, u_in, Hd, lo, hi, slack=False, soft=None):
+    """The same problem solved by proxsuite's dense solver with tight tolerances: (solved, x). ``soft``: the slack
+    QP's t-column (default: every row softened)."""
     n, nv = len(l), (4 if slack else 3)
+    soft = np.ones(n) if soft is None else np.asarray(soft, float)
     qp = proxsuite.proxqp.dense.QP(nv, 0, n, True)
     st = qp.settings
     st.eps_abs, st.eps_rel, st.max_iter, st.max_iter_in = 1e-12, 0.0, 200, 50
@@ -33,7 +35,7 @@ def proxsuite_qp(C, l, u_in, Hd, lo, hi, slack=False):
     st.check_duality_gap, st.eps_duality_gap_abs, st.eps_duality_gap_rel = True, 1e-12, 0.0
     if slack:
         qp.init(np.diag(np.r_[2 * Hd, 0.0]), np.r_[-2 * Hd * u_in, PENALTY], None, None,
-                np.hstack([C, np.ones((n, 1))]), l, np.full(n, 1e20), np.r_[lo, 0.0], np.r_[hi, 1e20])
+                np.hstack([C, soft[:, None]]), l, np.full(n, 1e20), np.r_[lo, 0.0], np.r_[hi, 1e20])
     else:
         qp.init(np.diag(2 * Hd), -2 * Hd * u_in, None, None, C, l, np.full(n, 1e20), lo, hi)
     qp.solve()
@@ -157,6 +159,52 @@ def test_hand_values():
     assert status == smallqp.INFEASIBLE
     status, u = smallqp.solve_hard(np.zeros((1, 3)), np.array([-0.2]), np.array([0.5, 0, 0]), Hd, lo, hi)
     assert status == smallqp.OK and np.array_equal(u, [0.5, 0.0, 0.0])
+
+
+def test_soft_rows_hand_values():
+    """By hand (H = I, box [-1, 1]^3, u_in = (0.6, 0.1, 0.2)): u_x >= 0.5 hard and u_x <= 0.3 soft gives u_x = 0.5,
+    t = 0.2 (the hard row exact, the soft one violated by the rest); the other way round u_x = 0.3, t = 0.2; both
+    rows hard is infeasible; both soft is solve_slack's balance (0.4, t = 0.1), bit for bit."""
+    lo, hi, Hd, u_in = -np.ones(3), np.ones(3), np.ones(3), np.array([0.6, 0.1, 0.2])
+    C, l = np.array([[1.0, 0, 0], [-1.0, 0, 0]]), np.array([0.5, -0.3])
+    status, u, t = smallqp.solve_soft(C, l, np.array([0.0, 1.0]), u_in, Hd, lo, hi, PENALTY)
+    assert status == smallqp.OK
+    np.testing.assert_allclose(np.r_[u, t], [0.5, 0.1, 0.2, 0.2], atol=1e-15)
+    status, u, t = smallqp.solve_soft(C, l, np.array([1.0, 0.0]), u_in, Hd, lo, hi, PENALTY)
+    assert status == smallqp.OK
+    np.testing.assert_allclose(np.r_[u, t], [0.3, 0.1, 0.2, 0.2], atol=1e-15)
+    assert smallqp.solve_soft(C, l, np.zeros(2), u_in, Hd, lo, hi, PENALTY)[0] == smallqp.INFEASIBLE
+    both = smallqp.solve_soft(C, l, np.ones(2), u_in, Hd, lo, hi, PENALTY)
+    ref = smallqp.solve_slack(C, l, u_in, Hd, lo, hi, PENALTY)
+    assert both[0] == ref[0] and both[1].tobytes() == ref[1].tobytes() and both[2] == ref[2]
+
+
+@pytest.mark.parametrize("kind", ("random", "parallel", "corner"))
+def test_soft_rows_against_proxsuite(kind):
+    """Random problems with a random half of the rows hard: where the hard rows and the box admit a command,
+    solve_soft's is proxsuite's to 1e-9 and holds every hard row; where solve_soft says infeasible, the hard rows
+    alone are (solve_hard)."""
+    rng = np.random.default_rng({"random": 31, "parallel": 32, "corner": 33}[kind])
+    counts = {"ok": 0, "infeasible": 0, "compared": 0}
+    for _ in range(300):
+        C, l, u_in, Hd, lo, hi = problem(rng, kind)
+        soft = (rng.random(len(l)) < 0.5).astype(float)
+        soft[int(rng.integers(len(l)))] = 1.0                     # at least one softened row
+        status, u, t = smallqp.solve_soft(C, l, soft, u_in, Hd, lo, hi, PENALTY)
+        hard = soft == 0
+        assert status in (smallqp.OK, smallqp.INFEASIBLE)
+        if status == smallqp.INFEASIBLE:
+            counts["infeasible"] += 1
+            assert hard.any() and smallqp.solve_hard(C[hard], l[hard], u_in, Hd, lo, hi)[0] == smallqp.INFEASIBLE
+            continue
+        counts["ok"] += 1
+        assert t >= -1e-12 and np.all(C[hard] @ u >= l[hard] - 1e-10 * (1 + np.abs(l[hard])))
+        assert np.all(C[~hard] @ u + t >= l[~hard] - 1e-10 * (1 + np.abs(l[~hard])))
+        ok, ref = proxsuite_qp(C, l, u_in, Hd, lo, hi, slack=True, soft=soft)
+        if ok:
+            counts["compared"] += 1
+            assert np.abs(u - ref[:3]).max() <= 1e-9 and abs(t - ref[3]) <= 1e-9
+    assert counts["ok"] > 100 and counts["compared"] > 100, counts
 
 
 def test_same_bits_whatever_the_memory_layout():
