@@ -42,10 +42,7 @@ SIM_ONLY = ("mujoco", "dm_control", "cv2")
 MUJOCO = ("mujoco", "dm_control")
 
 #: rule 4 as the code stands (reported, not weakened): module -> why it imports MuJoCo itself
-KNOWN_MUJOCO_OUTSIDE_SIM = {
-    "twin.model_fit": "the model fit works on MuJoCo's own objects (MjSpec parameters, mujoco.sysid's rollout and "
-                      "optimizer; issue 27); its MuJoCo calls belong in a sim module the twin calls, not yet split",
-}
+KNOWN_MUJOCO_OUTSIDE_SIM: dict[str, str] = {}
 
 
 def _module_name(path: Path) -> str:
@@ -184,7 +181,8 @@ def _mujoco_importers() -> set[str]:
     pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=KNOWN_MUJOCO_OUTSIDE_SIM[m]))
     if m in KNOWN_MUJOCO_OUTSIDE_SIM else m
     for m in sorted(set(KNOWN_MUJOCO_OUTSIDE_SIM) | {"bigcbf.episode", "bigcbf.video", "bigcbf.gym_env",
-                                                      "twin.record", "twin.calibrate"})])
+                                                      "twin.record", "twin.calibrate",
+                                                      "twin.model_fit", "twin.replay", "bigcbf.episode_perf"})])
 def test_mujoco_only_in_sim(module):
     """DESIGN.md: "sim  MuJoCo only here". Checked per module; the known exceptions are strict xfails."""
     assert module in modules()
@@ -194,3 +192,11 @@ def test_mujoco_only_in_sim(module):
 def test_no_other_module_imports_mujoco():
     """Every importer of mujoco or dm_control outside the sim layer is one of the known exceptions above."""
     assert _mujoco_importers() <= set(KNOWN_MUJOCO_OUTSIDE_SIM), _mujoco_importers() - set(KNOWN_MUJOCO_OUTSIDE_SIM)
+
+
+def test_the_model_fits_mujoco_side_is_in_sim():
+    """Issue 27: twin.model_fit reaches MuJoCo only through bigcbf.sim.sysid, which it loads on first use."""
+    edges = set(imports())
+    assert ("twin.model_fit", "bigcbf.sim.sysid", True) in edges
+    assert not any(a == "twin.model_fit" and b == "bigcbf.sim.sysid" and not lazy for a, b, lazy in edges)
+    assert any(a == "bigcbf.sim.sysid" and b.split(".")[0] == "mujoco" for a, b, _ in edges)

@@ -32,6 +32,10 @@ is identified when sysid's interval is finite (the Jacobian's near-null directio
 bootstrap half-width is at most ``max_rel_width`` of the value, and the estimate is not at a bound. A parameter the
 log does not identify is reported as such, frozen at the model's own value and the others refitted without it; it
 is never guessed.
+
+Every MuJoCo call of the fit (the MjSpec and its parameters' modifiers, the rollout, the optimizer, the iid
+intervals, the check of a written robot folder) is in ``bigcbf.sim.sysid`` (the sim layer: "MuJoCo only in sim");
+this module works on numpy arrays, plain values and that module's opaque handles, and imports no MuJoCo itself.
 """
 from __future__ import annotations
 
@@ -152,33 +156,26 @@ class ModelFit:
 
 
 # --- the model and its parameters ------------------------------------------------------------------------------
+def _sim():
+    """``bigcbf.sim.sysid``, the fit's MuJoCo side (loaded on first use: importing the twin loads no MuJoCo)."""
+    from bigcbf.sim import sysid as sim_sysid
+    return sim_sysid
+
+
 def require_sysid():
     """``mujoco.sysid``, or one line saying how to install it (its optional dependencies missing, the package
     imports empty)."""
-    try:
-        from mujoco import sysid
-    except ImportError:
-        sysid = None
-    if sysid is None or not hasattr(sysid, "optimize"):
+    sysid = _sim().load_sysid()
+    if sysid is None:
         raise UserError("the model fit needs MuJoCo's system identification (mujoco >= 4 with its sysid extra): "
                         "pip install 'bigcbf[sysid]'")
     return sysid
 
 
 def base_spec(robot_name: str):
-    """The robot's scene (robot + floor) as an MjSpec with a velocity sensor on each wheel joint."""
-    import mujoco
-
-    from bigcbf import robots
-    R = robots.robot(robot_name)
-    spec = mujoco.MjSpec.from_file(str(R.scene_xml))
-    for j in R.wheels:
-        spec.add_sensor(name=f"{j}_speed", type=mujoco.mjtSensor.mjSENS_JOINTVEL, objtype=mujoco.mjtObj.mjOBJ_JOINT,
-                        objname=j)
-    if spec.geom("floor") is None or spec.geom("chassis") is None:
-        raise UserError(f"robot {robot_name!r}: the model fit needs a geom 'floor' in scene.xml and a geom 'chassis'",
-                        file=str(R.scene_xml))
-    return spec
+    """The robot's scene (robot + floor) as an MjSpec with a velocity sensor on each wheel joint
+    (``bigcbf.sim.sysid.base_spec``; an opaque handle here)."""
+    return _sim().base_spec(robot_name)
 
 
 def physical(name: str, x, kv_nominal: float):
@@ -205,40 +202,15 @@ def parameters(robot_name: str):
     and the intervals are relative); the damping acts through the steady-state gain kv / (kv + damping), nearly
     linear in it and flat in its log near a small value, so its coordinate is damping / (DAMPING_UNIT kv) (1: about
     a 9 % loss of wheel speed), from 0."""
-    from mujoco import sysid
-
-    from bigcbf import robots
-    R = robots.robot(robot_name)
-    spec = base_spec(robot_name)
-    kv = float(spec.actuator(R.actuators[0]).gainprm[0])
-    damping = float(spec.joint(R.wheels[0]).damping[0])
-    friction = float(spec.geom("floor").friction[0])
-    mass = float(spec.geom("chassis").mass)
-
-    e = lambda p: physical(p.name, float(p.value[0]), kv)        # noqa: E731
-
-    def set_kv(s, p):
-        for a in R.actuators:
-            s.actuator(a).gainprm[0] = e(p)
-            s.actuator(a).biasprm[2] = -e(p)
-
-    def set_damping(s, p):
-        for j in R.wheels:
-            s.joint(j).damping[0] = e(p)
-
-    def set_friction(s, p):
-        s.geom("floor").friction[0] = e(p)
-
-    def set_mass(s, p):
-        s.geom("chassis").mass = e(p)
-
-    pd = sysid.ParameterDict()
+    sim = _sim()
+    v = sim.nominal_values(robot_name)
+    kv, damping, friction, mass = v["wheel_kv"], v["wheel_damping"], v["floor_friction"], v["base_mass"]
     ln = math.log
-    pd.add(sysid.Parameter("wheel_kv", ln(kv), ln(0.1 * kv), ln(10 * kv), modifier=set_kv))
-    pd.add(sysid.Parameter("wheel_damping", damping / (DAMPING_UNIT * kv), 0.0, 4.0, modifier=set_damping))
-    pd.add(sysid.Parameter("floor_friction", ln(friction), ln(0.1), ln(3.0), modifier=set_friction))
-    pd.add(sysid.Parameter("base_mass", ln(mass), ln(0.3 * mass), ln(3.0 * mass), modifier=set_mass))
-    return pd
+    rows = [("wheel_kv", ln(kv), ln(0.1 * kv), ln(10 * kv)),
+            ("wheel_damping", damping / (DAMPING_UNIT * kv), 0.0, 4.0),
+            ("floor_friction", ln(friction), ln(0.1), ln(3.0)),
+            ("base_mass", ln(mass), ln(0.3 * mass), ln(3.0 * mass))]
+    return sim.parameter_dict(robot_name, rows, lambda name, x: physical(name, x, kv))
 
 
 # --- the signals -------------------------------------------------------------------------------------------------
@@ -313,13 +285,10 @@ class Problem:
 def problem(data, front: RobotProfile, robot_name: str, opt: ModelFitOptions, imu=None) -> Problem:
     """The fit's measured bins (odometry twist, IMU yaw rate when given: (t, rate) relative to the first command)
     and the wheel targets over the fitted span."""
-    import mujoco
-    from mujoco import sysid
-
     from bigcbf import robots
+    sim = _sim()
     R = robots.robot(robot_name)
-    spec = base_spec(robot_name)
-    model = spec.compile()
+    spec, model, dt = sim.compile_base(robot_name)
     t0 = float(data.cmd.t[0])
     span = float(data.odom.t[-1] - t0) if opt.t_end_s is None else min(opt.t_end_s, float(data.odom.t[-1] - t0))
     n_bins = int(span // opt.bin_s)
@@ -334,13 +303,9 @@ def problem(data, front: RobotProfile, robot_name: str, opt: ModelFitOptions, im
         m_imu, h_imu = binned(imu[0], imu[1][:, None], edges)
         meas, have = np.column_stack([meas, m_imu]), have & h_imu
         channels.append(CHANNELS[3])
-    dt = float(model.opt.timestep)
     times = np.arange(int(round(span / dt))) * dt
     ctrl = wheel_targets(data.cmd.t, data.cmd.u, front, R.kinematics, times)
-    control = sysid.TimeSeries.from_control_names(times, ctrl, model, list(R.actuators))
-    d = mujoco.MjData(model)
-    mujoco.mj_forward(model, d)
-    state = sysid.create_initial_state(model, d.qpos.copy(), d.qvel.copy())
+    control, state = sim.rollout_inputs(model, R.actuators, times, ctrl)
     scale = np.maximum(np.nanstd(meas[have], axis=0), MIN_SCALE)
     return Problem(robot_name, spec, R.kinematics, control, state, edges, meas[have], have, scale, channels)
 
@@ -348,17 +313,11 @@ def problem(data, front: RobotProfile, robot_name: str, opt: ModelFitOptions, im
 def simulate_bins(pb: Problem, params) -> np.ndarray:
     """Roll the model with ``params`` out over the fitted span (``mujoco.sysid.sysid_rollout``) and bin its
     odometry twist (wheel speeds through the forward kinematics; yaw rate from the IMU gyro) like the log's."""
-    import mujoco
-    from mujoco import sysid
-    model = sysid.apply_param_modifiers(params, pb.spec)
-    traj = sysid.sysid_rollout(model, mujoco.MjData(model), pb.control, pb.initial_state)[0]
-    sd = traj.sensordata
-    w = np.column_stack([sd.data[:, sd.signal_mapping[f"{j}_speed"][1]].ravel()
-                         for j in robots_wheels(pb.robot)])
-    gyro = sd.data[:, sd.signal_mapping["imu_gyro"][1]][:, 2]
+    times, w, gyro = _sim().rollout_wheels_gyro(pb.spec, params, pb.control, pb.initial_state,
+                                                robots_wheels(pb.robot))
     twist = (np.linalg.pinv(pb.kin.jacobian) @ w.T).T * np.asarray(pb.kin.effective_scale)
     twist[:, 2] = gyro
-    sim, _ = binned(sd.times, twist, pb.edges)
+    sim, _ = binned(times, twist, pb.edges)
     sim = sim[pb.keep]
     if len(pb.channels) == 4:
         sim = np.column_stack([sim, sim[:, 2]])
@@ -461,16 +420,10 @@ def coarse_start(pb: Problem, params, opt: ModelFitOptions) -> None:
 def _optimize(pb: Problem, params, opt: ModelFitOptions, coarse: bool = True):
     """One bounded least-squares fit with mujoco.sysid.optimize (after :func:`coarse_start` when ``coarse``);
     (fitted ParameterDict, result, residual)."""
-    import contextlib
-    import io
-
-    from mujoco import sysid
     fn = residual_fn(pb)
     if coarse:
         coarse_start(pb, params, opt)
-    with contextlib.redirect_stdout(io.StringIO()):       # scipy's backend prints every iteration
-        fitted, res = sysid.optimize(params, fn, optimizer="scipy_parallel_fd", verbose=False,
-                                     max_iters=opt.max_iters, diff_step=opt.diff_step, x_scale=1.0)
+    fitted, res = _sim().optimize(params, fn, opt.max_iters, opt.diff_step)
     r = fn(fitted.as_vector(), fitted)[0][0]
     return fitted, res, r
 
@@ -501,15 +454,14 @@ def _judge(names, x, lo_b, hi_b, lo, hi, iid, corr, opt: ModelFitOptions) -> tup
 def _intervals(pb: Problem, params, res, r, opt: ModelFitOptions):
     """Bootstrap (lo, hi), sysid's iid half-width and the columns' reproducibility for the non-frozen parameters
     of ``params`` (fit coordinates)."""
-    from mujoco import sysid
     J, corr = reproducible_columns(pb, params, r, opt.diff_step)
     x = params.as_vector()
-    _, iid = sysid.calculate_intervals([r], J, alpha=1 - opt.level)
+    iid = _sim().iid_halfwidth(r, J, opt.level)
     block_bins = max(1, int(round(opt.block_s / opt.bin_s)))
     d_lo, d_hi = block_bootstrap(J, r, len(pb.channels), block_bins, opt.n_boot, opt.level,
                                  np.random.default_rng(opt.seed))
     lo_b, hi_b = params.get_bounds()
-    return np.clip(x + d_lo, lo_b, hi_b), np.clip(x + d_hi, lo_b, hi_b), np.asarray(iid, float), corr, J
+    return np.clip(x + d_lo, lo_b, hi_b), np.clip(x + d_hi, lo_b, hi_b), iid, corr, J
 
 
 def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
@@ -648,18 +600,11 @@ def write_robot_folder(fit: ModelFit, out: str | Path) -> list[Path]:
 def check_written(out: Path, fit: ModelFit) -> None:
     """Compile the written folder as a robot and compare its parameters with the fit's (a text edit that missed
     would otherwise pass silently)."""
-    import mujoco
-
     from bigcbf import robots
     R = robots.robot(str(out))
-    m = mujoco.MjModel.from_xml_path(str(R.scene_xml))
-    a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, R.actuators[0])
-    j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, R.wheels[0])
-    base = mujoco.MjModel.from_xml_path(str(robots.robot(fit.robot).scene_xml))
-    b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base_link")
-    got = {"wheel_kv": m.actuator_gainprm[a, 0], "wheel_damping": m.dof_damping[m.jnt_dofadr[j]],
-           "floor_friction": m.geom_friction[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0],
-           "base_mass": fit.nominal[fit.names.index("base_mass")] + m.body_mass[b] - base.body_mass[b]}
+    c = _sim().compiled_fit_values(R.scene_xml, robots.robot(fit.robot).scene_xml, R.actuators[0], R.wheels[0])
+    got = {"wheel_kv": c["wheel_kv"], "wheel_damping": c["wheel_damping"], "floor_friction": c["floor_friction"],
+           "base_mass": fit.nominal[fit.names.index("base_mass")] + c["base_link_mass"] - c["base_mass_of_base"]}
     for n in got:
         if not np.isclose(got[n], fit.value_of(n), rtol=1e-4, atol=1e-9):
             raise UserError(f"the written model has {n} = {got[n]:.6g}, the fit {fit.value_of(n):.6g}",
