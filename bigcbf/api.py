@@ -66,9 +66,12 @@ def load_config(config: str | Path | RunConfig | None = None, profile: str | Pat
     if base is None and not isinstance(config, RunConfig) and notes is not None:
         from .config import TUNED_PATH, tuned_provenance
         prov = tuned_provenance()
-        if prov is not None:           # the shipped tuned configuration is every method's default (docs/tuning.md)
+        if prov is not None and config is None:    # the shipped tuned configuration is every method's default
             notes(f"method defaults: the tuned configuration {TUNED_PATH.name} ({prov}); --config "
                   f"{TUNED_PATH.parent / 'defaults.toml'} runs the authors' defaults")
+        elif prov is not None:      # a --config file is read over it (docs/tuning.md)
+            notes(f"{config}: read over the tuned configuration {TUNED_PATH.name} (a method key the file does not "
+                  "set keeps its tuned value)")
     if profile is not None:
         stack = load_stack_params(profile, base=cfg.stack)
         missing = [a for a, ok in zip(("vx", "vy"), stack.uncertainty.execution.identified[:2]) if not ok]

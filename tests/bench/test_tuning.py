@@ -225,5 +225,12 @@ def test_tuned_defaults_note_follows_a_success_only(tmp_path, capsys, monkeypatc
         assert main(["run", "required_sidestepping", "--method", "cbf-only", "--time-limit", "0.5", "--json"]) == 0
         err = capsys.readouterr().err
         assert "note: method defaults: the tuned configuration tuned.toml (Provenance: grid grid.toml sha256 0123" in err
+        # with --config the note says the file is read over the tuned values, not that those are the defaults
+        own = tmp_path / "own.toml"
+        own.write_text("[methods.cbf-only.stack]\nalpha_per_s = 1.5\n")
+        assert main(["run", "required_sidestepping", "--method", "cbf-only", "--time-limit", "0.5", "--json",
+                     "--config", str(own)]) == 0
+        err = capsys.readouterr().err
+        assert "method defaults" not in err and f"note: {own}: read over the tuned configuration tuned.toml" in err
     finally:
         config.shipped_tuned.cache_clear()
