@@ -98,9 +98,6 @@ def summarize(rows: Iterable[dict]) -> dict:
     rows = list(rows)
     ok = [r["metrics"] for r in rows if r["status"] == "ok"]
     n = len(ok)
-    steps = sum(int(m["control_steps"]) for m in ok)
-    active = sum(round(m["cbf_active_ratio"] * m["control_steps"]) for m in ok)
-    infeasible = sum(round(m["qp_infeasible_ratio"] * m["control_steps"]) for m in ok)
     return {
         "episodes": len(rows),
         "ok": n,
@@ -114,8 +111,8 @@ def summarize(rows: Iterable[dict]) -> dict:
         "missed_scans": _mean([m.get("missed_scans") for m in ok]),
         "min_clearance_m": _mean([m["min_clearance_m"] for m in ok]),
         "e_cbf": _mean([m["e_cbf"] for m in ok]),
-        "cbf_active_pct": 100.0 * active / steps if steps else None,
-        "qp_infeasible_pct": 100.0 * infeasible / steps if steps else None,
+        "cbf_active_pct": _step_pct(ok, "cbf_active_ratio"),
+        "qp_infeasible_pct": _step_pct(ok, "qp_infeasible_ratio"),
         "qp_infeasible_ci95_pct": ratio_ci_pct(*_infeasible_steps(ok)),
         "velocity_relaxed_pct": _step_pct([m for m in ok if "velocity_relaxed_ratio" in m], "velocity_relaxed_ratio"),
         "collisions": sum(bool(m["collision"]) for m in ok),

@@ -474,14 +474,10 @@ class CbfFilter:
                                           SLACK_PENALTY)
         if status != smallqp.OK or not np.isfinite(x).all():
             return None
-        hard = ~soft
-        u, viol = _clip_violation(np.ascontiguousarray(C[hard]), np.ascontiguousarray(lvec[hard]), x, self.lo,
-                                  self.hi)
+        u, viol = _clip_violation(C[~soft], lvec[~soft], x, self.lo, self.hi)     # (boolean indexing copies)
         if viol > 1e-6:
             return None
-        _, t_star = _clip_violation(np.ascontiguousarray(C[soft]), np.ascontiguousarray(lvec[soft]), u, self.lo,
-                                    self.hi)
-        return u, max(float(t_star), 0.0)
+        return u, max(float(_clip_violation(C[soft], lvec[soft], u, self.lo, self.hi)[1]), 0.0)
 
     def _velocity_rows(self, state: RobotState, obstacles: Obstacles, rows: CbfRows, idx: np.ndarray, u_in):
         """The collision-cone rows of the selected obstacles (``velocity_barrier.velocity_rows``), D_i^exec from

@@ -138,7 +138,7 @@ class EpisodeMetrics:
         self.e_cbf += e_step
         self.active += bool(filt.active)
         self.infeasible += bool(filt.infeasible)
-        self.velocity_relaxed += bool(getattr(filt, "velocity_relaxed", False))
+        self.velocity_relaxed += bool(filt.velocity_relaxed)
         self.perception_faults += filt.fallback == PERCEPTION_FAULT
         if filt.infeasible:
             self.e_cbf_infeasible += e_step
