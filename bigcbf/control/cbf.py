@@ -30,14 +30,19 @@ Infeasibility (or a solver failure): the same QP with one slack t >= 0 shared by
 
     min_(u, t) (u - u_in)^T H (u - u_in) + SLACK_PENALTY t   s.t.  C_i u + t >= l_i,  u_min <= u <= u_max,
 
-finds the least worst-case violation t* = min_u max_i (l_i - C_i u)^+ over the box and, among the commands
-attaining it, the minimum-intervention one (the penalty exceeds any multiplier of the normalized rows, so t is
-minimized first; a row with a component below ~1e-5 is the exception: the penalty then stops short of that
-component's last ~1e-6 m/s of violation, rather than swing u by the whole box for it). This problem is always
-feasible and solved exactly by the same method (``smallqp.solve_slack``); a least-violation LP followed by a QP on
-the rows relaxed by t* is not well posed: its feasible set shrinks to a point or a segment. If t* > ``FEAS_TOL``
-the QP was infeasible (fallback "least-violation"); otherwise the solver had failed on a feasible problem and the
-slack QP's solution is the answer (fallback "qp-retry", not infeasible). If the slack QP fails too, the filter
+finds the least worst-case violation t* = min_u max_i (l_i - C_i u)^+ over the box (the penalty exceeds any
+multiplier of the normalized rows, so t is minimized first). This problem is always feasible and solved exactly by
+the same method (``smallqp.solve_slack``). When t* > ``FEAS_TOL`` the QP was infeasible (fallback
+"least-violation"), and the command is the minimum-intervention one among those within ``SLACK_TOL_MPS`` (5 mm/s)
+of the least violation: the hard QP on the rows relaxed by t* + SLACK_TOL_MPS (feasible: the slack solution meets
+it; well posed: its feasible set has an interior, where the rows relaxed by t* alone shrink to a point or a
+segment). Why the tolerance: the exact penalty makes t the only thing that counts, so a component worth a few mm/s
+of violation is driven to its box bound; the calibrated execution model's cross-couplings (A's yaw column, ~0.002)
+give every row a yaw-rate component of that size, and the slack command turned the robot at the full 1 rad/s to
+gain 2 mm/s, swinging the corner of its rectangular body into a box (big-cbf-plus, mixed dense traffic seed 4,
+2026-11-26: an at-fault contact at 0.06 m/s), and jumped between two such near-equal solutions on alternate steps.
+Otherwise (t* <= FEAS_TOL) the solver had failed on a feasible problem and the slack QP's solution is the answer
+(fallback "qp-retry", not infeasible). If the slack QP fails too, the filter
 brakes (u = 0, inside the box; fallback "brake"). A non-finite u_in is treated as 0 (fallback "invalid-input").
 The output is always finite and inside the box.
 
@@ -57,7 +62,8 @@ The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): 
 that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same
 D_i^exec; the rows go through the same pre-check and QP. When that QP has no solution, the distance rows come
 first (lexicographically): the slack QP with only the velocity rows softened (``smallqp.solve_soft``) keeps every
-distance row exact and relaxes the cone rows by the least worst-case violation (fallback "velocity-relaxed",
+distance row exact and relaxes the cone rows by the least worst-case violation (then, as above, the
+minimum-intervention command within ``SLACK_TOL_MPS`` of it; fallback "velocity-relaxed",
 ``FilterInfo.velocity_relaxed``; the step is not infeasible: the paper's QP, eq:hard_cbf_qp (26), held). Only when
 the distance rows and the box admit no command is the step infeasible, and then the slack QP over every row and
 the last resort decide as above. Without this order the switch could trade a distance row's violation for a cone
@@ -97,6 +103,10 @@ FEAS_TOL = 1e-7        # a normalized row may be violated by this much [m/s] and
 #: exact-penalty weight of the slack in the least-violation QP (module docstring): the rows are normalized, so
 #: their multipliers stay below 2 max(H) (|u_max - u_min| + ...) ~ 10; 1e4 leaves a wide margin
 SLACK_PENALTY = 1e4
+#: the least-violation command's tolerance (module docstring) [m/s]: among the commands whose worst row violation is
+#: within this of the least, the minimum-intervention one. A tenth of v_freeze and a sixth of the calibrated execution
+#: residual bound (0.032 m/s): a violation difference the robot cannot execute, let alone measure
+SLACK_TOL_MPS = 5e-3
 #: FilterInfo.fallback of a step braked for a perception fault (module docstring)
 PERCEPTION_FAULT = "perception-fault"
 
@@ -405,7 +415,25 @@ class CbfFilter:
         if not np.isfinite(x).all():
             return None
         u, viol = _clip_violation(C, lvec, x, self.lo, self.hi)
-        return max(float(viol), 0.0), u
+        t_star = max(float(viol), 0.0)
+        if t_star > FEAS_TOL:
+            u, t_star = self._within_tolerance(C, lvec, np.ones(len(lvec), bool), u_in, u, t_star)
+        return t_star, u
+
+    def _within_tolerance(self, C, lvec, soft, u_in, u, t_star) -> tuple[np.ndarray, float]:
+        """The second stage of the least-violation command (module docstring): the minimum-intervention command with
+        the ``soft`` rows relaxed by t* + SLACK_TOL_MPS and the others exact (``smallqp.solve_hard``). ``u`` (whose
+        soft rows are violated by at most t*) is feasible there, so only a solver failure keeps it. Returns
+        (u, the soft rows' largest violation)."""
+        status, x = smallqp.solve_hard(C, lvec - np.where(soft, t_star + SLACK_TOL_MPS, 0.0), u_in, self.Hd,
+                                       self.lo, self.hi)
+        if status != smallqp.OK or not np.isfinite(x).all():
+            return u, t_star
+        x = np.minimum(np.maximum(x, self.lo), self.hi)
+        short = lvec - C @ x
+        if (~soft).any() and float(short[~soft].max()) > 1e-6:
+            return u, t_star
+        return x, max(float(short[soft].max()), 0.0)
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
         """eq:cbf_condition, eq:hard_cbf_qp: the minimum-intervention safe command u_safe (3,) and what the filter
@@ -477,7 +505,10 @@ class CbfFilter:
         u, viol = _clip_violation(C[~soft], lvec[~soft], x, self.lo, self.hi)     # (boolean indexing copies)
         if viol > 1e-6:
             return None
-        return u, max(float(_clip_violation(C[soft], lvec[soft], u, self.lo, self.hi)[1]), 0.0)
+        t_star = max(float(_clip_violation(C[soft], lvec[soft], u, self.lo, self.hi)[1]), 0.0)
+        if t_star > FEAS_TOL:
+            u, t_star = self._within_tolerance(C, lvec, soft, u_in, u, t_star)
+        return u, t_star
 
     def _velocity_rows(self, state: RobotState, obstacles: Obstacles, rows: CbfRows, idx: np.ndarray, u_in):
         """The collision-cone rows of the selected obstacles (``velocity_barrier.velocity_rows``), D_i^exec from

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bigcbf.control.cbf import CbfFilter, cbf_rows, select_constraints
+from bigcbf.control.cbf import SLACK_TOL_MPS, CbfFilter, cbf_rows, select_constraints
 from bigcbf.control.uncertainty import barrier, inflated_radius, uncertainty_radius
 from bigcbf.params import PHYSICAL, SIMULATION, ExecutionModel
 from bigcbf.types import Obstacles, RobotState
@@ -135,13 +135,14 @@ def test_filter_properties(obstacles, theta, u_in, imperfect):
     ref, f_ref = brute_force_qp(C, l, u_in, np.array(params.H_diag), LO, HI)
     if ref is None:
         assert info.infeasible and info.fallback in ("least-violation", "brake") and info.max_violation > 0
-        # no point of a grid over the box violates the worst row less than the fallback does (up to the grid)
+        # no point of a grid over the box violates the worst row less than the fallback does by more than the
+        # tolerance within which the fallback takes the minimum-intervention command (SLACK_TOL_MPS)
         grid = np.stack(np.meshgrid(*[np.linspace(lo, hi, 21) for lo, hi in zip(LO, HI)]), -1).reshape(-1, 3)
         worst_grid = np.max(l[None] - grid @ C.T, axis=1).min()
         # (1e-4: the exact penalty trades a little worst-case violation for intervention when a row's coefficient
         # is tiny; measured 1.5e-6 m/s with a coefficient of 1.9e-6 on vx, a robot on an obstacle's centre, and
         # 3.0e-5 with a coefficient of 6.1e-5 at theta = 6.1e-5 rad, an example a clean-clone run drew under xdist)
-        assert np.max(l - C @ u) <= worst_grid + 1e-4
+        assert np.max(l - C @ u) <= worst_grid + SLACK_TOL_MPS + 1e-4
         return
     assert not info.infeasible and info.fallback is None
     # every eq:cbf_condition (25) constraint holds (evaluated literally) and the bounds hold
@@ -189,6 +190,31 @@ def test_infeasible_least_violation():
     assert info.max_violation == pytest.approx(float(np.max(rows.l - rows.C @ u)), abs=1e-9)
     for dx in (-0.05, 0.05):
         assert np.max(rows.l - rows.C @ (u + [dx, 0, 0])) > info.max_violation
+
+
+def test_least_violation_takes_the_least_intervention_within_its_tolerance():
+    """The least-violation command (bigcbf/control/cbf.py's docstring), by hand: two opposed rows that no vx
+    satisfies, each with a yaw-rate component of 0.002 (the size the calibrated execution model's cross-coupling
+    gives). Their least worst violation, over the box |wz| <= w_max, is t* = 0.5 - 0.002 w_max at vx = 0, wz = w_max
+    (what the exact penalty alone commanded: the full yaw rate for 2 mm/s). Within SLACK_TOL_MPS of t*, the
+    minimum-intervention command from u_in = 0 keeps wz = 0 (its violation 0.5 <= t* + 0.005), and vx = vy = 0."""
+    C = np.array([[1.0, 0.0, 0.002], [-1.0, 0.0, 0.002]])
+    l = np.array([0.5, 0.5])
+    filt = CbfFilter(P)
+    t_star, u = filt._least_violation(C, l, np.zeros(3))
+    np.testing.assert_allclose(u, [0.0, 0.0, 0.0], atol=1e-9)
+    assert t_star == pytest.approx(0.5, abs=1e-9)
+    assert t_star <= 0.5 - 0.002 * HI[2] + SLACK_TOL_MPS + 1e-12
+    # a command asked with a yaw rate keeps it: the tolerance does not move wz toward the rows' favour either
+    t_star, u = filt._least_violation(C, l, np.array([0.0, 0.3, -0.4]))
+    np.testing.assert_allclose(u, [0.0, 0.3, -0.4], atol=1e-9)
+    assert t_star == pytest.approx(0.5 + 0.002 * 0.4, abs=1e-9) and t_star <= 0.5 - 0.002 * HI[2] + SLACK_TOL_MPS
+    # the same rows with a larger yaw component: the tolerance binds, wz moves exactly as far as it must
+    C2 = np.array([[1.0, 0.0, 0.02], [-1.0, 0.0, 0.02]])
+    t_star, u = filt._least_violation(C2, l, np.zeros(3))
+    w = (0.5 - (0.5 - 0.02 * HI[2] + SLACK_TOL_MPS)) / 0.02          # 0.02 w >= 0.5 - (t* + tol)
+    np.testing.assert_allclose(u, [0.0, 0.0, w], atol=1e-7)
+    assert t_star == pytest.approx(0.5 - 0.02 * HI[2] + SLACK_TOL_MPS, abs=1e-7)
 
 
 def test_degenerate_and_invalid_input_never_nan():
