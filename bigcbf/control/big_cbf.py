@@ -18,7 +18,7 @@ import numpy as np
 from ..params.stack import PAPER_RULES, PlusRules, StackParams
 from ..types import Obstacles, RobotState
 from .behaviors import REVERSE, behavior_command
-from .encounters import EncounterTracker
+from .encounters import EncounterTracker, meeting_side
 from .executed_speed import judge_at_executed_speed, speed_params
 from .governor import GOVERNED_MODES, govern_command
 from .imagination import Imagination, choose_release, imagine
@@ -92,7 +92,8 @@ class BigCbfPlanner:
             img, scale = judge_at_executed_speed(img, state, obstacles, goal, p, shared=self.shared,
                                                  current=self.selector.mode, rules=self.rules)
         enc = None if self.encounters is None else self.encounters.update(t, state.p, goal, obstacles)
-        sel = self.selector.select(t, img, enc)
+        lean = meeting_side(state.p, goal, obstacles, p) if self.rules.meeting_side else 0
+        sel = self.selector.select(t, img, enc, lean)
         self._speed_params = (p if scale is None or sel.mode not in img.modes
                               else speed_params(p, float(scale[img.index(sel.mode)])))
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used

@@ -40,6 +40,7 @@ not for a one-selection advantage (the flips measured in issue 25 were one about
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,6 +90,49 @@ def accumulate_evidence(evidence: float, advantage: float, params: StackParams) 
     A constant advantage D reaches a threshold E only if min(D - w_sw, D_cap) T_B / (1 - lambda) > E."""
     e = EVIDENCE_LEAK * evidence + min(advantage - params.w_sw, EVIDENCE_CAP) * params.T_B_s   # D = inf: the cap
     return float(min(max(e, 0.0), EVIDENCE_MAX))
+
+
+#: |e| below this: the person walks on the robot's goal line and neither side is preferred (the scores decide) [m]
+MEETING_BAND_M = 0.1
+#: a person within this angle of the goal line's axis walks along the path (head-on or ahead) [rad]
+MEETING_AXIS_RAD = math.pi / 6
+
+
+def meeting_side(p, goal, obstacles: Obstacles, params: StackParams) -> int:
+    """The rule ``meeting_side`` (``PlusRules``): the side (+1 left, -1 right, 0 none) away from the nearest person
+    who walks along the robot's path and will meet it soon. With d_g, n_g of ``eq:goal_basis`` (9), a tracked
+    obstacle i (id >= 0) counts when it moves at ``cbf_velocity_min_speed_mps`` or more within ``MEETING_AXIS_RAD``
+    of the d_g axis (head-on, or ahead in the robot's direction), is ahead, s_i = (p_i - p) . d_g > 0, and closes on
+    the robot moving at v_max along d_g within two imagination horizons, s_i <= 2 N dt (v_max - v_i . d_g). Its
+    lateral offset e_i = (p_i - p) . n_g (its current one: a walker along a path keeps its line, and the lateral
+    velocity of a track is its noisiest part) decides for the nearest such person in s_i: -sign(e_i) when
+    |e_i| >= ``MEETING_BAND_M``, else 0.
+
+    Why (measured in docs/fidelity.md): the imagination's horizon (N dt = 1.5 s) ends before a head-on meeting
+    that is 2 s away, so the first side is picked by differences that have nothing to do with the person (in a 2 m
+    corridor, the two SIDE rollouts' wall terms), and the commitment rules then keep it; on the nine, every one of
+    big-cbf-plus's corridor meetings with infeasible filter steps had first sidestepped toward the person."""
+    M = len(obstacles)
+    if not M:
+        return 0
+    p = np.asarray(p, float).reshape(2)
+    d_g, n_g, dist = goal_basis(p, goal)
+    if dist <= 0.0:
+        return 0
+    rel = obstacles.p - p
+    s = rel @ d_g
+    e = rel @ n_g
+    v_al = obstacles.v @ d_g
+    speed = np.hypot(obstacles.v[:, 0], obstacles.v[:, 1])
+    along = np.abs(v_al) >= speed * math.cos(MEETING_AXIS_RAD)
+    closing = params.v_max_mps - v_al
+    horizon = 2.0 * params.N * params.dt_s
+    ok = ((obstacles.ids >= 0) & (speed >= params.cbf_velocity_min_speed_mps) & along & (s > 0)
+          & (closing > 0) & (s <= horizon * closing))
+    if not ok.any():
+        return 0
+    k = int(np.flatnonzero(ok)[np.argmin(s[ok])])
+    return 0 if abs(float(e[k])) < MEETING_BAND_M else -int(np.sign(e[k]))
 
 
 class EncounterTracker:

@@ -71,6 +71,11 @@ class BehaviorSelector:
     first sided mode
     selected during an encounter commits it. While an encounter is current, the side commitment above takes its
     side from the encounter (none for an uncommitted one), not from the last sided mode.
+
+    Meeting side (a rule of ours, ``PlusRules.meeting_side``, off in ``big-cbf``): while no side is held (neither
+    the side commitment nor a committed encounter), and ``select`` is given a side ``lean`` away from a person
+    walking along the path (``bigcbf.control.encounters.meeting_side``), the other side's modes are not viable at
+    this selection if a mode on ``lean``'s side is; the side then chosen is held by the rules above.
     """
 
     def __init__(self, params: StackParams, rules: PlusRules = PAPER_RULES):
@@ -120,13 +125,18 @@ class BehaviorSelector:
         self.side = float(enc.side)
         return acc & (side != -enc.side) if enc.side != 0 else acc
 
-    def select(self, t: float, img: Imagination, encounter=None) -> Selection:
+    def select(self, t: float, img: Imagination, encounter=None, lean: int = 0) -> Selection:
         """One selection (class docstring); ``encounter``: the current encounter
-        (:class:`~bigcbf.control.encounters.Encounter`) under the rule ``encounter_commitment``, else None."""
+        (:class:`~bigcbf.control.encounters.Encounter`) under the rule ``encounter_commitment``, else None;
+        ``lean``: the side of the rule ``meeting_side`` (``encounters.meeting_side``; 0: none)."""
         p = self.params
         acc = img.viable
         if encounter is not None and self.rules.encounter_commitment:
             acc = self._encounter_viable(img, acc, encounter)
+        if lean and self.rules.meeting_side and self.side == 0 and (encounter is None or encounter.side == 0):
+            side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+            if (acc & (side == lean)).any():     # the first side away from the person, when it has a candidate
+                acc = acc & (side != -lean)
         prev = self.mode
         if not acc.any():
             sel = Selection(REVERSE, "fallback", prev != REVERSE)

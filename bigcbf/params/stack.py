@@ -326,6 +326,11 @@ class PlusRules:
       distance (the horizon lengthened as the speed falls), and runs at the fastest speed that passes
       (``bigcbf.control.executed_speed``; off: every candidate judged at v_b^max only). Off by default: on 80 dev
       worlds it gained nothing (docs/fidelity.md, "Commitment per encounter").
+    - ``meeting_side`` (issues 23 and 25): the first side taken in front of a person walking along the robot's path
+      (head-on or being overtaken) who will meet it within two horizons is the side away from that person's lateral
+      offset from the robot's goal line, when a candidate on it passes ``eq:behavior_acceptance`` (22)
+      (``bigcbf.control.encounters.meeting_side``; off: the scores alone pick the side, and the horizon of 1.5 s
+      ends before the meeting).
     - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
       (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
@@ -348,6 +353,7 @@ class PlusRules:
     commit_release_selections: int = ranged(5, 1, 100)  # K: selections with the side infeasible before release [-]
     commit_evidence_js: float = ranged(1.2, 0, 1e6)  # evidence for the other side that releases the side [J s]
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
+    meeting_side: bool = True  # the first side away from a person walking along the path (encounters.py) [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
 

@@ -190,3 +190,48 @@ def test_the_metric_tracks_encounters_at_planning_cycles_and_mode_changes():
     assert rec.tracker.open[0].t_seen == 0.0                   # a control step without a selection: skipped
     rec.add(0.1, RobotState(0.0, 0.0, 0.0), _post(2.0, 0.0), GOAL, "PASS-L", planned=False)
     assert rec.tracker.open[0].t_seen == 0.1 and rec.metrics()["encounters"] == 1   # the mode changed: counted
+
+
+def test_meeting_side_is_away_from_a_person_walking_along_the_path_by_hand():
+    """encounters.meeting_side, by hand: robot at the origin, goal (6, 0) (d_g = +x, n_g = +y), v_max 0.8 m/s,
+    2 N dt = 3 s."""
+    from bigcbf.control.encounters import meeting_side
+    # head-on at 1.1 m/s, 3.7 m ahead, 0.3 m to the left: closing 0.8 + 1.1 = 1.9 m/s, 3.7 <= 3 x 1.9: right (-1)
+    assert meeting_side((0, 0), GOAL, _post(3.7, 0.3, ident=2, v=(-1.1, 0.0)), P) == -1
+    assert meeting_side((0, 0), GOAL, _post(3.7, -0.3, ident=2, v=(-1.1, 0.0)), P) == 1
+    # 6.0 m ahead: 6.0 > 5.7, meets beyond two horizons: none
+    assert meeting_side((0, 0), GOAL, _post(6.0, 0.3, ident=2, v=(-1.1, 0.0)), P) == 0
+    # on the goal line within the band (|e| = 0.05 < 0.1): none; a robot that stands beside it sees the offset
+    assert meeting_side((0, 0), GOAL, _post(3.0, 0.05, ident=2, v=(-1.1, 0.0)), P) == 0
+    assert meeting_side((0, -0.2), (6.0, -0.2), _post(3.0, 0.05, ident=2, v=(-1.1, 0.0)), P) == -1
+    # overtaking a walker at 0.4 m/s, 2 m ahead, 0.2 m to the right: closing 0.4 m/s, 2.0 <= 1.2: no; 1.0 m ahead: left
+    assert meeting_side((0, 0), GOAL, _post(2.0, -0.2, ident=2, v=(0.4, 0.0)), P) == 0
+    assert meeting_side((0, 0), GOAL, _post(1.0, -0.2, ident=2, v=(0.4, 0.0)), P) == 1
+    # a walker faster than the robot in its direction never meets it; a crossing one (45 deg off the axis > 30 deg),
+    # a standing one (0.1 < 0.2 m/s), a wall point (id -1) and one behind the robot do not count
+    assert meeting_side((0, 0), GOAL, _post(1.0, -0.2, ident=2, v=(1.0, 0.0)), P) == 0
+    assert meeting_side((0, 0), GOAL, _post(2.0, 0.3, ident=2, v=(-0.8, -0.8)), P) == 0
+    assert meeting_side((0, 0), GOAL, _post(2.0, 0.3, ident=2, v=(-0.1, 0.0)), P) == 0
+    assert meeting_side((0, 0), GOAL, _post(2.0, 0.3, ident=-1, v=(-1.0, 0.0)), P) == 0
+    assert meeting_side((0, 0), GOAL, _post(-1.0, 0.3, ident=2, v=(1.0, 0.0)), P) == 0
+    # the nearest one ahead decides
+    two = Obstacles.from_lists([[3.0, -0.4], [2.0, 0.4]], v=[[-1.0, 0.0], [-1.0, 0.0]], r=0.25, ids=[4, 5])
+    assert meeting_side((0, 0), GOAL, two, P) == -1
+    assert meeting_side((0, 0), GOAL, Obstacles.empty(), P) == 0
+
+
+def test_the_meeting_side_picks_the_first_side_only():
+    sel = BehaviorSelector(P, PlusRules())
+    # SIDE-L is the best, but the person is on the left (lean -1): the right side's best, SIDE-R, is taken
+    assert sel.select(0.0, _img([1, 1, 1, 1, 1], [1, 0.9, 0.95, 0.2, 0.5]), None, lean=-1).mode == "SIDE-R"
+    # once a side is held, the lean no longer decides: with lean +1, the right is kept (SIDE-L's 0.3 advantage is
+    # below the threshold plus w_sw of the side commitment)
+    assert sel.select(2.0, _img([1, 1, 1, 1, 1], [1, 0.9, 0.95, 0.2, 0.5]), None, lean=1).mode == "SIDE-R"
+    # no accepted mode on the lean's side: the lean is ignored
+    sel2 = BehaviorSelector(P, PlusRules())
+    assert sel2.select(0.0, _img([1, 1, 0, 1, 0], [1, 0.9, 0.95, 0.2, 0.5]), None, lean=-1).mode == "SIDE-L"
+    # the paper's selector (PAPER_RULES) and plus with the switch off ignore it
+    for rules in (PAPER_RULES, PlusRules(meeting_side=False)):
+        assert BehaviorSelector(P, rules).select(0.0, _img([1, 1, 1, 1, 1], [1, 0.9, 0.95, 0.2, 0.5]), None,
+                                                 lean=-1).mode == "SIDE-L"
+    assert not PAPER_RULES.meeting_side and PlusRules().meeting_side
