@@ -9,6 +9,8 @@ robot. The LiDAR sees groups 1-2 only.
 """
 from __future__ import annotations
 
+import copy
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import mujoco
@@ -160,6 +162,41 @@ def build_model(spec: SceneSpec | None = None) -> mujoco.MjModel:
     model.cam_projection[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, "top")] = \
         mujoco.mjtProjection.mjPROJ_ORTHOGRAPHIC
     return model
+
+
+#: compiled scenes kept per process (``cached_model``)
+MODEL_CACHE_SIZE = 8
+_MODEL_CACHE: OrderedDict = OrderedDict()
+
+
+def _robot_files_stamp(name: str) -> tuple:
+    """(path, size, mtime) of every file of the robot's folder: a robot file edited between two episodes of one
+    process is compiled anew."""
+    out = []
+    for f in sorted(robots.folder(name).rglob("*")):
+        if f.is_file():
+            st = f.stat()
+            out.append((str(f), st.st_size, st.st_mtime_ns))
+    return tuple(out)
+
+
+def cached_model(spec: SceneSpec) -> mujoco.MjModel:
+    """A copy of ``build_model(spec)``, compiled once per process for the last ``MODEL_CACHE_SIZE`` scenes (issue 26:
+    the bench runs every method on each world of a (scenario, seed), and a scene's compilation by dm_control.mjcf
+    costs 0.1-0.25 s against about 3 ms for copying its MjModel). The key is the scene's value (``SceneSpec`` is a
+    frozen dataclass: every field that ``compose`` reads) and the robot folder's files (path, size, mtime). The
+    copy is a deep copy (``MjModel.__copy__``): the caller may change it without touching the cache. The same model,
+    so the same episode, bit for bit (tests/sim/test_scene_cache.py)."""
+    key = (spec, _robot_files_stamp(spec.robot))
+    model = _MODEL_CACHE.get(key)
+    if model is None:
+        model = build_model(spec)
+        _MODEL_CACHE[key] = model
+        while len(_MODEL_CACHE) > MODEL_CACHE_SIZE:
+            _MODEL_CACHE.popitem(last=False)
+    else:
+        _MODEL_CACHE.move_to_end(key)
+    return copy.copy(model)
 
 
 def open_room(extent: float = 6.0, walls: bool = True) -> SceneSpec:

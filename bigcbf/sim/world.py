@@ -20,7 +20,7 @@ from .faults import LidarFaults
 from .firmware import Encoders, Gyro, ImperfectionLayer, WheelOdometry
 from .kinematics import MecanumKinematics
 from .lidar import Lidar, LidarConfig
-from .scene import SceneSpec, build_model, open_room
+from .scene import SceneSpec, cached_model, open_room
 
 #: the default robot's wheels (fl, fr, rl, rr); a SimWorld takes its robot's from ``bigcbf.robots`` (``world.robot``)
 WHEELS = ("fl", "fr", "rl", "rr")
@@ -53,7 +53,7 @@ class SimWorld:
         if profile.floor_friction is not None:
             from dataclasses import replace
             self.scene = replace(self.scene, floor_friction=profile.floor_friction)
-        self.model = model if model is not None else build_model(self.scene)
+        self.model = model if model is not None else cached_model(self.scene)
         self.data = mujoco.MjData(self.model)
         self.profile = profile
         self.kin = kinematics

@@ -14,7 +14,17 @@ def test_longest_first_orders_by_the_cost_model(tmp_path):
     ordered = longest_first(tasks)
     assert sorted(ordered, key=lambda t: t.key) == sorted(tasks, key=lambda t: t.key)      # the same tasks
     costs = [estimated_cost(t) for t in ordered]
-    assert all(c > 0 for c in costs) and costs == sorted(costs, reverse=True)
+    assert all(c > 0 for c in costs)
+    # grouped by world (scenario, seed): each group contiguous, its episodes the most work first, and the groups by
+    # their longest episode, the most work first
+    worlds = [(t.scenario_sha, t.seed) for t in ordered]
+    runs = [w for k, w in enumerate(worlds) if k == 0 or worlds[k - 1] != w]
+    assert len(runs) == len(set(worlds)) == 4
+    heads = [costs[worlds.index(w)] for w in runs]
+    assert heads == sorted(heads, reverse=True)
+    for w in runs:
+        c = [costs[k] for k in range(len(worlds)) if worlds[k] == w]
+        assert c == sorted(c, reverse=True) and c[0] == max(c)
     # the longest-running pairs lead: mppi in the dense scene (longer time limit, more walkers), cbf-only last
     assert (ordered[0].method, ordered[0].scenario) == ("mppi", "mixed_dense_traffic")
     assert ordered[-1].method == "cbf-only" and ordered[-1].scenario == "single_person_crossing"
