@@ -429,11 +429,10 @@ class CbfFilter:
                                        self.lo, self.hi)
         if status != smallqp.OK or not np.isfinite(x).all():
             return u, t_star
-        x = np.minimum(np.maximum(x, self.lo), self.hi)
-        short = lvec - C @ x
-        if (~soft).any() and float(short[~soft].max()) > 1e-6:
+        x, viol = _clip_violation(C[~soft], lvec[~soft], x, self.lo, self.hi)    # (-inf without hard rows)
+        if viol > 1e-6:
             return u, t_star
-        return x, max(float(short[soft].max()), 0.0)
+        return x, max(float(_clip_violation(C[soft], lvec[soft], x, self.lo, self.hi)[1]), 0.0)
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
         """eq:cbf_condition, eq:hard_cbf_qp: the minimum-intervention safe command u_safe (3,) and what the filter

@@ -20,6 +20,11 @@ class Selection:
     switched: bool
 
 
+def _sides(img: Imagination) -> np.ndarray:
+    """(B,) the side of each candidate mode: +1 left (PASS-L, SIDE-L), -1 right, 0 none."""
+    return np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+
+
 class BehaviorSelector:
     """Keeps b_cur and decides, at each selection, between keeping it and switching.
 
@@ -94,7 +99,7 @@ class BehaviorSelector:
         best = int(np.argmin(J))
         if self.side == 0 or not self.rules.side_commitment:
             return img.modes[best]
-        side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+        side = _sides(img)
         own = np.where(side != -self.side, J, np.inf)
         k = int(np.argmin(own))
         if not np.isfinite(own[k]) or k == best:
@@ -106,7 +111,7 @@ class BehaviorSelector:
     def _encounter_viable(self, img: Imagination, acc: np.ndarray, enc) -> np.ndarray:
         """The encounter commitment (class docstring): ``acc`` without the committed encounter's opposite side;
         counts the selections at which its own side failed eq:behavior_acceptance (22) and releases it after K."""
-        side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+        side = _sides(img)
         if enc.side != 0:
             if (np.asarray(img.accepted) & (side == enc.side)).any():
                 enc.blocked = max(enc.blocked - 1, 0)
@@ -134,7 +139,7 @@ class BehaviorSelector:
         if encounter is not None and self.rules.encounter_commitment:
             acc = self._encounter_viable(img, acc, encounter)
         if lean and self.rules.meeting_side and self.side == 0 and (encounter is None or encounter.side == 0):
-            side = np.array([SIGMA[MODE_INDEX[m]] for m in img.modes])
+            side = _sides(img)
             if (acc & (side == lean)).any():     # the first side away from the person, when it has a candidate
                 acc = acc & (side != -lean)
         prev = self.mode

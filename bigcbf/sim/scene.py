@@ -183,7 +183,7 @@ def _robot_files_stamp(name: str) -> tuple:
 def cached_model(spec: SceneSpec) -> mujoco.MjModel:
     """A copy of ``build_model(spec)``, compiled once per process for the last ``MODEL_CACHE_SIZE`` scenes (issue 26:
     the bench runs every method on each world of a (scenario, seed), and a scene's compilation by dm_control.mjcf
-    costs 0.1-0.25 s against about 3 ms for copying its MjModel). The key is the scene's value (``SceneSpec`` is a
+    costs 0.1-0.3 s against under 1 ms for copying its MjModel). The key is the scene's value (``SceneSpec`` is a
     frozen dataclass: every field that ``compose`` reads) and the robot folder's files (path, size, mtime). The
     copy is a deep copy (``MjModel.__copy__``): the caller may change it without touching the cache. The same model,
     so the same episode, bit for bit (tests/sim/test_scene_cache.py)."""
