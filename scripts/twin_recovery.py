@@ -13,9 +13,13 @@ calibration drive is recorded in the simulator and calibrated; the figures are c
   limits and nothing else (no latency, gains 1, no bias or noise): the simulated wheels follow their targets with
   a ~17 ms lag, and behind an acceleration ramp that lag reads as dead time (a ramp delayed and a ramp lagged look
   the same); on the ideal profile (no limits) it reads as a lag instead. Both differences are printed;
-- gains: the diagonal of A against the profile's gains (relative error, worst axis).
+- gains: the diagonal of A against the profile's gains (relative error, worst axis), and against the profile's
+  gains times the model's own (the reference drive's A: the simulated wheels realise 97-100 % of a target);
+- interval coverage, per identified axis: whether the 90 % latency interval holds the mean latency plus that
+  axis's own latency on the reference drive, and whether the 90 % gain interval (``Calibration.gain_ci``) holds the
+  gain times the reference drive's; with the binomial band a 90 % interval should fall in over that many cases.
 
-Prints one row per profile and the maximum and median of each error.
+Prints one row per profile and the maximum and median of each error, and the coverages.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binom
 
 from bigcbf.params.robot import RobotProfile
 from twin.calibrate import calibrate_log
@@ -69,13 +74,26 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
             row["err_v_max"] = None if st.v_max is None else st.v_max / prof.wheel_speed_max_mps - 1
             row["err_accel"] = None if dyn.accel_max is None else dyn.accel_max / prof.wheel_accel_max_mps2 - 1
             row["err_gain"] = float(np.max(np.abs(np.diag(cal.fit.A) / g - 1)))
+            ax = np.flatnonzero(cal.fit.identified)
+            g_model = g * np.diag(ref.fit.A)
+            row["gains_model_true"] = g_model.tolist()
+            row["err_gain_model"] = float(np.max(np.abs(np.diag(cal.fit.A)[ax] / g_model[ax] - 1)))
+            lat_ax = lat_true + ref.latency_s
+            ci_l, ci_g = cal.latency_ci_s, cal.gain_ci
+            row["latency_ci_s"], row["gain_ci"] = ci_l.tolist(), ci_g.tolist()
+            row["latency_covered"] = [bool(ci_l[j, 0] <= lat_ax[j] <= ci_l[j, 1]) for j in ax
+                                      if np.isfinite(ci_l[j]).all() and np.isfinite(lat_ax[j])]
+            row["gain_covered"] = [bool(ci_g[j, 0] <= g_model[j] <= ci_g[j, 1]) for j in ax
+                                   if np.isfinite(ci_g[j]).all()]
             rows.append(row)
             f = lambda x, fmt: "none" if x is None else format(x, fmt)   # noqa: E731
             print(f"{i:3d} latency {lat_true:.3f} -> {row['latency_s']:.3f} s ({row['err_latency_s'] * 1e3:+5.1f} ms; "
                   f"vs ideal {row['err_latency_vs_ideal_s'] * 1e3:+5.1f})  "
                   f"v_max {prof.wheel_speed_max_mps:.3f} -> {f(st.v_max, '.3f')} ({f(row['err_v_max'], '+.1%')})  "
                   f"accel {prof.wheel_accel_max_mps2:.2f} -> {f(dyn.accel_max, '.2f')} ({f(row['err_accel'], '+.1%')})"
-                  f"  gains {row['err_gain']:.1%}  "
+                  f"  gains {row['err_gain']:.1%} (x model's {row['err_gain_model']:.1%})  "
+                  f"covered latency {sum(row['latency_covered'])}/{len(row['latency_covered'])} "
+                  f"gains {sum(row['gain_covered'])}/{len(row['gain_covered'])}  "
                   f"lever {st.lever_m:.3f}{'' if st.lever_identified else '?'}  {row['seconds']:.0f} s", flush=True)
     return rows
 
@@ -83,11 +101,19 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
 def summary(rows: list[dict]) -> dict:
     out = {}
     for key, scale in (("err_v_max", 1), ("err_accel", 1), ("err_latency_s", 1), ("err_latency_vs_ideal_s", 1),
-                       ("err_gain", 1)):
+                       ("err_gain", 1), ("err_gain_model", 1)):
         vals = [abs(r[key]) * scale for r in rows if r[key] is not None]
         missing = sum(r[key] is None for r in rows)
         out[key] = {"max": max(vals) if vals else None, "median": float(np.median(vals)) if vals else None,
                     "not_identified": missing}
+    out["within_10ms_latency"] = sum(abs(r["err_latency_s"]) <= 0.010 for r in rows)
+    out["within_3pct_gains"] = sum(r["err_gain"] <= 0.03 for r in rows)
+    out["within_3pct_gains_model"] = sum(r["err_gain_model"] <= 0.03 for r in rows)
+    for key in ("latency_covered", "gain_covered"):
+        hits = [c for r in rows for c in r[key]]
+        n = len(hits)
+        lo, hi = binom.interval(0.95, n, 0.90) if n else (0, 0)
+        out[key] = {"covered": int(sum(hits)), "cases": n, "band_90pct_level": [int(lo), int(hi)]}
     return out
 
 
@@ -101,7 +127,10 @@ def main() -> None:
     rows = run(args.n, args.seed, args.duration)
     s = summary(rows)
     for k, v in s.items():
-        print(f"{k:20s} max {v['max']}  median {v['median']}  not identified {v['not_identified']}")
+        if isinstance(v, dict) and "max" in v:
+            print(f"{k:24s} max {v['max']}  median {v['median']}  not identified {v['not_identified']}")
+        else:
+            print(f"{k:24s} {v}")
     if args.json is not None:
         args.json.write_text(json.dumps({"rows": rows, "summary": s}, indent=1))
 

@@ -45,9 +45,9 @@ from bigcbf.params.stack import ExecutionModel, StackParams, Tau95Parts
 from bigcbf.params.toml_io import from_dict, to_dict
 
 from .delay import DelayEstimate, DelayOptions, estimate_delay
-from .execution import (AXES, ExecutionFit, ExecutionOptions, identified_axes, input_condition, saturated_samples,
-                        settled_samples)
-from .limits import LimitOptions, SaturatingModel, fit_model
+from .execution import (AXES, ExecutionFit, ExecutionOptions, gain_intervals, identified_axes, input_condition,
+                        saturated_samples, settled_samples)
+from .limits import LimitOptions, SaturatingModel, fit_model, rim_demand
 from .residual import ResidualBound, ResidualOptions, calibrate_bound, conformal_quantile, holdout_mask
 from .signals import intervals, quantile_upper, zoh
 from .timebase import OdomTiming, TimebaseOptions, command_publication, prepare
@@ -102,6 +102,7 @@ class Calibration:
     axis_coverage: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) its held-out coverage
     rmse_all: dict[str, np.ndarray] = field(default_factory=dict)   # every held-out sample: nominal, identity,
     #                                                                 linear (eq:execution (1)), saturating
+    gain_ci: np.ndarray = field(default_factory=lambda: np.full((3, 2), np.nan))  # (3, 2) 90 % interval of diag A
 
     @property
     def latency_s(self) -> np.ndarray:
@@ -193,6 +194,7 @@ class Calibration:
                                          "near_tie_s": a.runner_up_s if a.tie else None, "edges": a.edges,
                                          "edge_median_s": a.edge_median_s} for j, a in d.axes.items()}},
             "A": self.fit.A.tolist(), "d": self.fit.d.tolist(),
+            "gain_ci90": {AXES[j]: self.gain_ci[j].tolist() for j in range(3) if np.isfinite(self.gain_ci[j]).all()},
             "identified": {a: bool(x) for a, x in zip(AXES, self.fit.identified)},
             "limits": self.limits_json(),
             "e_exec": {"residual_speed_mps": self.bound.speed_knots.tolist(),
@@ -385,6 +387,11 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
         raise UserError(f"too few usable samples for the residual bound ({int((use & ~held).sum())} settled, "
                         f"unsaturated samples in the calibration blocks, need {MIN_MESSAGES})", file=path)
     fit = ExecutionFit(st.A, st.d, axes, sat[~held] | short[~held], int((use & ~held).sum()), settled_only)
+    # A's samples: the settled ones of the calibration blocks, clearly below a wheel limit (limits.fit_static)
+    gain_use = model.settled & ~held
+    if st.v_max is not None:
+        gain_use &= rim_demand(u @ st.A.T + st.d, st.lever_m) <= st.v_max * (1 - opt.limits.kink_margin)
+    gain_ci = gain_intervals(t[gain_use], u[gain_use], v[gain_use], axes, st.A, opt.execution)
     r = v - fit.predict(u)
     speed = np.hypot(u[:, 0], u[:, 1])
     resid = np.hypot(r[:, 0], r[:, 1])
@@ -467,7 +474,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
         warnings=warnings, model=model, timing=timing, publication=publication, coverage_heldout_all=cov_all,
         rmse_saturating=_rmse((v - model.y)[sc]), axis_bound=axis_bound, axis_coverage=axis_cov,
         rmse_all={"nominal": _rmse((v - zoh(cmd.t, cmd.u, t))[sc]), "identity": _rmse((v - u0)[sc]),
-                  "linear": _rmse(r[sc]), "saturating": _rmse((v - model.y)[sc])})
+                  "linear": _rmse(r[sc]), "saturating": _rmse((v - model.y)[sc])}, gain_ci=gain_ci)
 
 
 def read_log(path: str | Path, cmd_topic: str | None = None, odom_topic: str | None = None,
@@ -578,8 +585,10 @@ def summary_lines(cal: Calibration) -> list[str]:
                f"no acceleration limit seen (at least {dyn.accel_floor:.0f} m/s^2)")
         lines.append(f"limits         {lim}; {acc}")
     for j, a in enumerate(AXES):
+        ci = cal.gain_ci[j]
+        gain = f" (gain 90 % [{ci[0]:.3f}, {ci[1]:.3f}])" if np.isfinite(ci).all() else ""
         lines.append(f"A[{a}]          {fmt(f.A[j])}   d {f.d[j]:+.4f}   "
-                     + ("identified" if f.identified[j] else "NOT identified (not excited by the log)"))
+                     + ("identified" + gain if f.identified[j] else "NOT identified (not excited by the log)"))
     lines += [f"e_exec         horizon {cal.residual_horizon_s:.3f} s x bound(|u_xy|): "
               + ", ".join(f"{s:.2f} m/s -> {v:.4f}" for s, v in zip(b.speed_knots, b.bound_knots)),
               f"coverage       stated {b.coverage:.3f}; settled unsaturated: calibration {b.coverage_calibration:.3f}, "

@@ -508,7 +508,11 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
             # trade off), given as the dead time at this axis's lag
             picks = sel[np.argmin(W @ e.T, axis=1)]
             half = c4.L[picks, j] + c4.T[picks, j] * np.log(2)
-            ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2)
+            # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
+            # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
+            # moves out by half a step (else a 90 % interval reads [0.050, 0.050])
+            step = float(offs[1] - offs[0])
+            ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
     notes = []
     for j in np.flatnonzero(axes):
         if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
