@@ -8,11 +8,14 @@ calibration drive is recorded in the simulator and calibrated; the figures are c
 
 - wheel-speed limit: the identified rim-speed limit against ``wheel_speed_max_mps`` (relative error);
 - acceleration limit: the identified rim-acceleration limit against ``wheel_accel_max_mps2`` (relative error);
-- latency: the identified dead time (median over the axes) minus the model's own, against latency_s +
+- latency: the identified latency (median over the axes) minus the model's own, against latency_s +
   latency_jitter_s / 2 (the mean latency). The model's own is measured on a reference drive with the same wheel
-  limits and nothing else (no latency, gains 1, no bias or noise): the simulated wheels follow their targets with
-  a ~17 ms lag, and behind an acceleration ramp that lag reads as dead time (a ramp delayed and a ramp lagged look
-  the same); on the ideal profile (no limits) it reads as a lag instead. Both differences are printed;
+  limits and a known latency of REF_LATENCY_S and nothing else (gains 1, no bias or noise), as its identified
+  latency minus REF_LATENCY_S: the simulated wheels follow their targets with a ~17 ms lag, and behind an
+  acceleration ramp part of that lag reads as dead time (a ramp delayed and a ramp lagged look the same); on the
+  ideal profile (no limits) it reads as a lag instead. The reference's latency keeps it off the search's floor:
+  with none, a dead time cannot go below 0, and behind a ramp the reference read 0 where the same limits with
+  0.1 s read 0.1035 (3.5 ms of the model's own). Both differences are printed;
 - gains: the diagonal of A against the profile's gains (relative error, worst axis), and against the profile's
   gains times the model's own (the reference drive's A: the simulated wheels realise 97-100 % of a target);
 - interval coverage, per identified axis: whether the 90 % latency interval holds the mean latency plus that
@@ -38,6 +41,7 @@ from twin.record import random_profile, record_calibration
 
 
 draw_profile = random_profile
+REF_LATENCY_S = 0.1      # the reference drive's latency (docstring) [s]
 
 
 def run(n: int, seed: int, duration: float) -> list[dict]:
@@ -54,11 +58,12 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
             t0 = time.perf_counter()
             record_calibration(prof, path, seed=seed + 1 + i, duration_s=duration)
             cal = calibrate_log(path)
-            ref_prof = RobotProfile(wheel_speed_max_mps=prof.wheel_speed_max_mps,
+            ref_prof = RobotProfile(latency_s=REF_LATENCY_S, wheel_speed_max_mps=prof.wheel_speed_max_mps,
                                     wheel_accel_max_mps2=prof.wheel_accel_max_mps2)
             record_calibration(ref_prof, path, seed=seed + 1 + i, duration_s=duration)
             ref = calibrate_log(path)
-            L_ref = float(np.nanmedian(ref.latency_s))
+            own = ref.latency_s - REF_LATENCY_S              # the model's own latency per axis
+            L_ref = float(np.nanmedian(own))
             st, dyn = cal.model.static, cal.model.dynamic
             g = np.diag(np.asarray(prof.gain))
             lat_true = prof.latency_s + prof.latency_jitter_s / 2
@@ -78,7 +83,7 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
             g_model = g * np.diag(ref.fit.A)
             row["gains_model_true"] = g_model.tolist()
             row["err_gain_model"] = float(np.max(np.abs(np.diag(cal.fit.A)[ax] / g_model[ax] - 1)))
-            lat_ax = lat_true + ref.latency_s
+            lat_ax = lat_true + own
             ci_l, ci_g = cal.latency_ci_s, cal.gain_ci
             row["latency_ci_s"], row["gain_ci"] = ci_l.tolist(), ci_g.tolist()
             row["latency_covered"] = [bool(ci_l[j, 0] <= lat_ax[j] <= ci_l[j, 1]) for j in ax
