@@ -58,6 +58,7 @@ class BigCbfPlanner:
         self.shared = shared
         self.rules = rules
         self.name = "big-cbf" if shared else "big-cbf-noshared"
+        self.static_steps: int | None = None     # the rule long_horizon (big-cbf-plus): see BigCbfPlusPlanner
         self.selector = BehaviorSelector(params, rules)
         # the rule encounter_commitment (big-cbf-plus): the obstacle being passed, across selections (encounters.py)
         self.encounters = EncounterTracker(params, rules) if rules.encounter_commitment else None
@@ -86,11 +87,13 @@ class BigCbfPlanner:
         """One behavior-selection cycle (eq:behavior_rollout (12), eq:behavior_terms (13), eq:behavior_cost (14),
         eq:behavior_acceptance (22), eq:analytic_workload (24)): imagine, score, select; keeps only the mode."""
         p = self.params
-        img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode, rules=self.rules)
+        img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode, rules=self.rules,
+                      static_steps=self.static_steps)
         scale = None
         if self.rules.executed_speed:          # rejected candidates judged again at slower speeds (executed_speed.py)
             img, scale = judge_at_executed_speed(img, state, obstacles, goal, p, shared=self.shared,
-                                                 current=self.selector.mode, rules=self.rules)
+                                                 current=self.selector.mode, rules=self.rules,
+                                                 static_steps=self.static_steps)
         enc = None if self.encounters is None else self.encounters.update(t, state.p, goal, obstacles)
         lean = meeting_side(state.p, goal, obstacles, p) if self.rules.meeting_side else 0
         sel = self.selector.select(t, img, enc, lean)
@@ -137,8 +140,14 @@ class BigCbfPlusPlanner(BigCbfPlanner):
     params_type = PlusRules
 
     def __init__(self, params: StackParams, rules: PlusRules | None = None):
-        super().__init__(params, shared=True, rules=PlusRules() if rules is None else rules)
+        rules = PlusRules() if rules is None else rules
+        # the rule long_horizon: the imagination (and all that reads its horizon) looks long_horizon_s ahead
+        planner_params = (dataclasses.replace(params, N=max(1, int(round(rules.long_horizon_s / params.dt_s))))
+                          if rules.long_horizon else params)
+        super().__init__(planner_params, shared=True, rules=rules)
         self.name = "big-cbf-plus"
+        # ... for the people who move: the obstacles that do not keep the stack's horizon in the barrier acceptance
+        self.static_steps = params.N if rules.long_horizon else None
         # the common filter with its velocity-aware rows and its last resort (methods.filter_params)
         self.filter_params = dataclasses.replace(params, cbf_last_resort=self.rules.last_resort,
                                                  cbf_velocity_rows=params.cbf_velocity_rows or self.rules.velocity_rows)

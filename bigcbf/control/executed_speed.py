@@ -61,9 +61,11 @@ def speed_params(params: StackParams, scale: float) -> StackParams:
 
 
 def judge_at_executed_speed(img: Imagination, state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
-                            shared: bool, current: str | None, rules: PlusRules) -> tuple[Imagination, np.ndarray]:
+                            shared: bool, current: str | None, rules: PlusRules,
+                            static_steps: int | None = None) -> tuple[Imagination, np.ndarray]:
     """The rule (module docstring): ``img`` with the rejected moving candidates re-judged at ``SCALES``, and each
-    row's speed scale (B,) (1.0 where the row is the full-speed one)."""
+    row's speed scale (B,) (1.0 where the row is the full-speed one). ``static_steps`` (the rule long_horizon,
+    ``imagination.imagine``) is lengthened with the horizon: the same distance."""
     scale = np.ones(len(img.modes))
     todo = [b for b, m in enumerate(img.modes) if m in _MOVING and img.available[b] and not img.accepted[b]]
     if not todo:
@@ -74,7 +76,9 @@ def judge_at_executed_speed(img: Imagination, state: RobotState, obstacles: Obst
             break
         slow_p = speed_params(params, s)
         modes = tuple(img.modes[b] for b in todo)
-        slow = imagine(state, obstacles, goal, slow_p, modes=modes, shared=shared, current=current, rules=rules)
+        steps = None if static_steps is None else min(int(math.ceil(static_steps / s - 1e-9)), slow_p.N)
+        slow = imagine(state, obstacles, goal, slow_p, modes=modes, shared=shared, current=current, rules=rules,
+                       static_steps=steps)
         left = []
         for k, b in enumerate(todo):
             if slow.accepted[k] and slow.h_min[k] >= 0.0:      # the filter's own test, without eps_h (docstring)

@@ -384,10 +384,13 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
 
 
 def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params: StackParams,
-                   shared: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                   shared: bool, static_steps: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                           np.ndarray]:
     """The shared barrier (eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) and the
     analytic compatibility W~ (eq:analytic_workload (24)) of rollouts ``ro``, all (b, k, i) at once; ``speed``
-    ||u_xy|| (B, N+1). Returns h_min, W, deficit (B,) and the margin (B, N+1, M) (see :class:`Imagination`)."""
+    ||u_xy|| (B, N+1). Returns h_min, W, deficit (B,) and the margin (B, N+1, M) (see :class:`Imagination`).
+    ``static_steps`` (the rule long_horizon): h_min takes the obstacles that do not move (:func:`moving_obstacles`)
+    over the states k = 0..static_steps only, the moving ones over all k = 0..N."""
     unc, ex = params.uncertainty, params.uncertainty.execution
     N, K, M = params.N, ro.K, len(obstacles)
     B = K.B
@@ -415,10 +418,24 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
                     np.asarray(obstacles.r, float), rel_speed, pred, e_exec, float(kap), shared, float(params.noshared_margin_m),
                     float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s), float(unc.e_zoh_m),
                     float(params.alpha_per_s), float(params.w_eps), grad2, h, margin, wterm)
-    h_min = h.reshape(B, -1).min(axis=1)
+    if static_steps is not None and static_steps < N:
+        moving = moving_obstacles(obstacles, params)
+        h_min = h[:, :static_steps + 1].reshape(B, -1).min(axis=1)
+        if moving.any():
+            h_min = np.minimum(h_min, h[:, :, moving].reshape(B, -1).min(axis=1))
+    else:
+        h_min = h.reshape(B, -1).min(axis=1)
     deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
     W = wterm.reshape(B, -1).sum(axis=1)
     return h_min, W, deficit, margin
+
+
+def moving_obstacles(obstacles: Obstacles, params: StackParams) -> np.ndarray:
+    """(M,) the tracked obstacles classified dynamic that move at least ``cbf_velocity_min_speed_mps`` (the common
+    filter's notion of a moving obstacle, the one its velocity-aware rows use)."""
+    speed = np.hypot(obstacles.v[:, 0], obstacles.v[:, 1])
+    return (~np.asarray(obstacles.static, bool) & (np.asarray(obstacles.ids) >= 0)
+            & (speed >= params.cbf_velocity_min_speed_mps))
 
 
 @kernel
@@ -458,13 +475,16 @@ def _barrier_kernel(Pc, Vc, Oc, Ov, r, rel_speed, pred, e_exec, kap, shared, nos
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
-            rules: PlusRules = PAPER_RULES) -> Imagination:
+            rules: PlusRules = PAPER_RULES, static_steps: int | None = None) -> Imagination:
     """eq:behavior_rollout (12) rollouts of ``modes`` from ``state`` and their scores (eq:behavior_terms (13),
     eq:behavior_cost (14), eq:behavior_acceptance (22), eq:analytic_workload (24)).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
     ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0). ``release_v``: see :func:`_rollout`.
     ``rules``: our rules beyond the paper (:class:`~bigcbf.params.stack.PlusRules`; default every one off).
+    ``static_steps`` (big-cbf-plus's rule long_horizon; None: the paper's test over every state): the barrier
+    acceptance (eq:behavior_acceptance (22)) takes the obstacles that do not move over the states k <= static_steps
+    only and the moving ones over the whole horizon.
 
     The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
     shot over (behaviors, steps, obstacles).
@@ -484,7 +504,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     U = np.zeros((ro.K.B, N, 3))
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
-    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared)
+    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared, static_steps)
 
     # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14))
     P_hist = np.stack([Pc.real, Pc.imag], -1)

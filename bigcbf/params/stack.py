@@ -334,6 +334,16 @@ class PlusRules:
     - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
       (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
+    - ``long_horizon`` (issue 23): the imagination looks ``long_horizon_s`` ahead (N = long_horizon_s / dt steps
+      of eq:imagined_dynamics; the paper leaves the horizon open and ``big-cbf`` uses the stack's N dt, 1.5 s). A
+      person crossing the robot's path 2 s ahead is then in every rollout before the robot walks into that path;
+      at 1.5 s the rollouts end before the crossing, the robot keeps going and is caught between the person and
+      whatever is behind it (docs/fidelity.md, "The long horizon"). The barrier acceptance (eq:behavior_acceptance
+      (22)) takes the moving obstacles (tracked, dynamic, at least ``cbf_velocity_min_speed_mps``) over the whole
+      horizon and the others over the stack's N steps only: the behaviors re-plan against what stands still at
+      every selection, and over 2.5 s a feedback policy's rollout runs into the next row of posts that it would
+      have passed after the next selection. Everything else that reads the horizon (the scores, the meeting
+      side's two horizons, the relevant obstacle's look-ahead without ``fixed_lookahead``) reads this one.
     - ``last_resort`` (issue 23): the common filter's last resort in big-cbf-plus's episodes, one of
       ``LAST_RESORTS`` (``StackParams.cbf_last_resort``; "slack" is the run's default). "passive" by default: on
       the generated test split it removed the one at-fault contact of "slack" (docs/fidelity.md).
@@ -355,6 +365,8 @@ class PlusRules:
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
     meeting_side: bool = True  # the first side away from a person walking along the path (encounters.py) [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
+    long_horizon: bool = True  # imagine long_horizon_s ahead (off: the stack's N dt) [on/off]
+    long_horizon_s: float = ranged(2.5, 0.1, 10)  # the imagination's horizon with long_horizon [s]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
 
     def __post_init__(self):
@@ -363,7 +375,7 @@ class PlusRules:
             if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
                 raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
         check_last_resort("last_resort", self.last_resort)
-        for k in ("in_way_margin_m", "relevant_range_m"):
+        for k in ("in_way_margin_m", "relevant_range_m", "long_horizon_s"):
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")
 

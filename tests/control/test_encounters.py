@@ -235,3 +235,44 @@ def test_the_meeting_side_picks_the_first_side_only():
         assert BehaviorSelector(P, rules).select(0.0, _img([1, 1, 1, 1, 1], [1, 0.9, 0.95, 0.2, 0.5]), None,
                                                  lean=-1).mode == "SIDE-L"
     assert not PAPER_RULES.meeting_side and PlusRules().meeting_side
+
+
+def test_long_horizon_sees_a_crossing_the_paper_horizon_ends_before_by_hand():
+    """The rule long_horizon (PlusRules, issue 23): big-cbf-plus imagines long_horizon_s = 2.5 s ahead (N = 25 steps
+    of dt = 0.1 s); big-cbf the paper's N = 15. By hand: the robot at the origin heading for (6, 0) at v_max 0.8 m/s;
+    a person (r 0.25 m) at (2.0, -1.8) walking +y at 0.9 m/s crosses the goal line at x = 2.0 at t = 2.0 s. GOAL's
+    rollout is at x <= 1.2 m when the paper's horizon ends (1.5 s), the person then at y = -0.45 m: centre distance
+    >= sqrt(0.8^2 + 0.45^2) = 0.92 m, beyond D_i (r_R + r + d0 + margin, under 0.8 m), so GOAL is accepted; over
+    2.5 s the robot reaches x ~ 1.6-2.0 m while the person crosses y = 0 at x = 2.0 (t = 2 s): inside D_i, GOAL
+    rejected (eq:behavior_acceptance (22))."""
+    plus = BigCbfPlusPlanner(P)
+    assert plus.params.N == 25 and plus.filter_params.N == P.N == 15
+    assert BigCbfPlusPlanner(P, PlusRules(long_horizon=False)).params.N == P.N
+    assert BigCbfPlanner(P).params.N == 15 and not PAPER_RULES.long_horizon
+    st = RobotState(0.0, 0.0, 0.0)
+    walker = Obstacles.from_lists([[2.0, -1.8]], v=[[0.0, 0.9]], r=0.25, ids=[4])
+    short = imagine(st, walker, GOAL, P, rules=PlusRules())
+    long_ = imagine(st, walker, GOAL, plus.params, rules=PlusRules())
+    assert dict(zip(short.modes, short.accepted))["GOAL"]
+    assert not dict(zip(long_.modes, long_.accepted))["GOAL"]
+    assert long_.p.shape[1] == 26 and short.p.shape[1] == 16        # states k = 0..N
+
+
+def test_long_horizon_judges_what_stands_still_over_the_stack_horizon_only_by_hand():
+    """The rule long_horizon's barrier acceptance: a post (static, r 0.2 m) at x = 2.3 m on the goal line; GOAL's
+    rollout runs x = 0.8 t, so x = 1.2 m at 1.5 s (1.1 m from the post's centre, beyond D_i = 0.56 m here) and
+    x = 2.0 m at 2.5 s (0.3 m: inside): accepted with static_steps = 15 (the stack's N), rejected when every state
+    of the 25 counts. A person (r 0.2 m) at x = 3.4 m walking at the robot at 0.5 m/s is 1.3 m from it at 1.5 s and
+    0.15 m at 2.5 s: a moving obstacle, judged over all 25 states, static_steps or not."""
+    plus = BigCbfPlusPlanner(P)
+    assert plus.static_steps == 15 and BigCbfPlanner(P).static_steps is None
+    assert BigCbfPlusPlanner(P, PlusRules(long_horizon=False)).static_steps is None
+    st = RobotState(0.0, 0.0, 0.0)
+    post = Obstacles.from_lists([[2.3, 0.0]], r=0.2, ids=[1], static=[True])
+    goal_ok = lambda img: dict(zip(img.modes, img.accepted))["GOAL"]      # noqa: E731
+    assert goal_ok(imagine(st, post, GOAL, P, rules=PlusRules()))                       # 1.5 s: x <= 1.2 m
+    assert not goal_ok(imagine(st, post, GOAL, plus.params, rules=PlusRules()))         # 2.5 s, every state
+    assert goal_ok(imagine(st, post, GOAL, plus.params, rules=PlusRules(), static_steps=15))
+    walker = Obstacles.from_lists([[3.4, 0.0]], v=[[-0.5, 0.0]], r=0.2, ids=[1], static=[False])
+    assert goal_ok(imagine(st, walker, GOAL, P, rules=PlusRules()))
+    assert not goal_ok(imagine(st, walker, GOAL, plus.params, rules=PlusRules(), static_steps=15))
