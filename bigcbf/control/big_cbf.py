@@ -58,7 +58,8 @@ class BigCbfPlanner:
         self.shared = shared
         self.rules = rules
         self.name = "big-cbf" if shared else "big-cbf-noshared"
-        self.static_steps: int | None = None     # the rule long_horizon (big-cbf-plus): see BigCbfPlusPlanner
+        self.score_steps: int | None = None      # the rule long_horizon (big-cbf-plus): see BigCbfPlusPlanner
+        self.release_params = params             # ... whose reverse release keeps the stack's horizon
         self.selector = BehaviorSelector(params, rules)
         # the rule encounter_commitment (big-cbf-plus): the obstacle being passed, across selections (encounters.py)
         self.encounters = EncounterTracker(params, rules) if rules.encounter_commitment else None
@@ -88,26 +89,27 @@ class BigCbfPlanner:
         eq:behavior_acceptance (22), eq:analytic_workload (24)): imagine, score, select; keeps only the mode."""
         p = self.params
         img = imagine(state, obstacles, goal, p, shared=self.shared, current=self.selector.mode, rules=self.rules,
-                      static_steps=self.static_steps)
+                      score_steps=self.score_steps)
         scale = None
         if self.rules.executed_speed:          # rejected candidates judged again at slower speeds (executed_speed.py)
             img, scale = judge_at_executed_speed(img, state, obstacles, goal, p, shared=self.shared,
                                                  current=self.selector.mode, rules=self.rules,
-                                                 static_steps=self.static_steps)
+                                                 score_steps=self.score_steps)
         enc = None if self.encounters is None else self.encounters.update(t, state.p, goal, obstacles)
         lean = meeting_side(state.p, goal, obstacles, p) if self.rules.meeting_side else 0
         sel = self.selector.select(t, img, enc, lean)
         self._speed_params = (p if scale is None or sel.mode not in img.modes
                               else speed_params(p, float(scale[img.index(sel.mode)])))
         if sel.mode == REVERSE:     # the fallback is no candidate: its release is chosen only when it is used
-            self._release_v, rel, best = choose_release(state, obstacles, goal, p, shared=self.shared,
-                                                        rules=self.rules)
+            self._release_v, rel, best = choose_release(state, obstacles, goal, self.release_params,
+                                                        shared=self.shared, rules=self.rules)
             self._path = rel.p[best]
             self._margins = rel.margin[best].ravel()
         else:
             self._release_v = None
             self._path = img.p[img.index(sel.mode)]
-            self._margins = img.margin[img.index(sel.mode)].ravel()
+            scored = None if self.score_steps is None else self.score_steps + 1      # the margins of the scored steps
+            self._margins = img.margin[img.index(sel.mode)][:scored].ravel()
         self.last_imagination, self.last_selection = img, sel
         return sel
 
@@ -146,8 +148,9 @@ class BigCbfPlusPlanner(BigCbfPlanner):
                           if rules.long_horizon else params)
         super().__init__(planner_params, shared=True, rules=rules)
         self.name = "big-cbf-plus"
-        # ... for the people who move: the obstacles that do not keep the stack's horizon in the barrier acceptance
-        self.static_steps = params.N if rules.long_horizon else None
+        # ... to test the barrier against the people who move; it scores, and releases, over the stack's N steps
+        if rules.long_horizon:
+            self.score_steps, self.release_params = params.N, params
         # the common filter with its velocity-aware rows and its last resort (methods.filter_params)
         self.filter_params = dataclasses.replace(params, cbf_last_resort=self.rules.last_resort,
                                                  cbf_velocity_rows=params.cbf_velocity_rows or self.rules.velocity_rows)

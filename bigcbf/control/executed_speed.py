@@ -62,9 +62,9 @@ def speed_params(params: StackParams, scale: float) -> StackParams:
 
 def judge_at_executed_speed(img: Imagination, state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
                             shared: bool, current: str | None, rules: PlusRules,
-                            static_steps: int | None = None) -> tuple[Imagination, np.ndarray]:
+                            score_steps: int | None = None) -> tuple[Imagination, np.ndarray]:
     """The rule (module docstring): ``img`` with the rejected moving candidates re-judged at ``SCALES``, and each
-    row's speed scale (B,) (1.0 where the row is the full-speed one). ``static_steps`` (the rule long_horizon,
+    row's speed scale (B,) (1.0 where the row is the full-speed one). ``score_steps`` (the rule long_horizon,
     ``imagination.imagine``) is lengthened with the horizon: the same distance."""
     scale = np.ones(len(img.modes))
     todo = [b for b, m in enumerate(img.modes) if m in _MOVING and img.available[b] and not img.accepted[b]]
@@ -76,13 +76,13 @@ def judge_at_executed_speed(img: Imagination, state: RobotState, obstacles: Obst
             break
         slow_p = speed_params(params, s)
         modes = tuple(img.modes[b] for b in todo)
-        steps = None if static_steps is None else min(int(math.ceil(static_steps / s - 1e-9)), slow_p.N)
+        steps = None if score_steps is None else min(int(math.ceil(score_steps / s - 1e-9)), slow_p.N)
         slow = imagine(state, obstacles, goal, slow_p, modes=modes, shared=shared, current=current, rules=rules,
-                       static_steps=steps)
+                       score_steps=steps)
         left = []
         for k, b in enumerate(todo):
             if slow.accepted[k] and slow.h_min[k] >= 0.0:      # the filter's own test, without eps_h (docstring)
-                _replace_row(out, b, slow, k, params)
+                _replace_row(out, b, slow, k, params, score_steps, steps)
                 scale[b] = s
             else:
                 left.append(b)
@@ -101,11 +101,13 @@ def _copy(img: Imagination) -> Imagination:
     return Imagination(**kw)
 
 
-def _replace_row(out: Imagination, b: int, slow: Imagination, k: int, params: StackParams) -> None:
+def _replace_row(out: Imagination, b: int, slow: Imagination, k: int, params: StackParams,
+                 score_steps: int | None = None, slow_steps: int | None = None) -> None:
     """Row b of ``out`` from row k of the slow imagination ``slow`` (module docstring: summed terms rescaled to the
-    standard horizon's time, the path and margins truncated to its N steps)."""
+    standard horizon's time, the path and margins truncated to its N steps; with the rule long_horizon the summed
+    terms are over the score steps, ``score_steps`` here and ``slow_steps`` there)."""
     N = params.N
-    f = N / (slow.u.shape[1])                       # N / ceil(N / s)
+    f = N / (slow.u.shape[1]) if score_steps is None else score_steps / slow_steps   # N / ceil(N / s)
     W, P, S = slow.W[k] * f, slow.P[k] * f, slow.S[k] * f
     out.W[b], out.P[b], out.F[b], out.S[b] = W, P, slow.F[k], S
     out.J[b] = (params.w_W * W - params.w_P * P + params.w_F * slow.F[k] + params.w_sw * slow.C_sw[k]

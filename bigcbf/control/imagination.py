@@ -209,14 +209,14 @@ def _groups(K: _Constants, obstacles: Obstacles, params: StackParams, rules: Plu
 
 def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams, modes: tuple[str, ...],
              release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
-             rules: PlusRules = PAPER_RULES) -> _Rollout:
+             rules: PlusRules = PAPER_RULES, score_steps: int | None = None) -> _Rollout:
     """eq:behavior_rollout (12): the closed-loop rollouts of ``modes``: the policy pi_b regenerated at every step
     from the imagined state and the predicted obstacles O^k (:meth:`behaviors.PolicyData.velocity`, the same
     compiled policy the execution loop calls), the robot propagated with the nominal eq:execution (1), the obstacles
     with eq:obs_prop (2) and eq:cov_prop (3). Planar vectors are complex numbers (x + i y; R(theta) is
     multiplication by e^{i theta}); all behaviors advance together. ``release_v`` (B,) complex: the constant world
     velocity of each REVERSE row (default: the push). ``rules``: our rules beyond the paper (the policy's PASS rules,
-    ``speed_governor``)."""
+    ``speed_governor``). ``score_steps``: ``along`` sums the first that many steps (default N)."""
     N, dt = params.N, params.dt_s
     K = _constants(modes, params)
     B, M = K.B, len(obstacles)
@@ -245,14 +245,16 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         Uk[N] = u = Uk[N - 1]
         Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
         return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, None)
-    along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk)
+    along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk,
+                           N if score_steps is None else min(score_steps, N))
     return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
 
 
 def _rollout_steps(policy: PolicyData, governed, Ok, Oc, p, th, N: int, dt: float, K: _Constants,
-                   rules: PlusRules, Pk, Vk, Uk, THk):
+                   rules: PlusRules, Pk, Vk, Uk, THk, along_steps: int | None = None):
     """The loop of :func:`_rollout` step by step in numpy (the speed governor, the push, or progress along the
-    maneuver): fills Pk, Vk, Uk, THk (N+1, B); returns ``along`` (None without the rule ``speed_governor``)."""
+    maneuver): fills Pk, Vk, Uk, THk (N+1, B); returns ``along`` over the first ``along_steps`` steps (None without
+    the rule ``speed_governor``)."""
     a_c, b_c, d_c, ideal_xy, a20, a21, dw, turning = K.a_c, K.b_c, K.d_c, K.ideal_xy, K.a20, K.a21, K.dw, K.turning
     B = K.B
     rot = np.exp(1j * th)
@@ -273,7 +275,7 @@ def _rollout_steps(policy: PolicyData, governed, Ok, Oc, p, th, N: int, dt: floa
         if w_gov is not None:      # governed rows move as the filter model predicts the common CBF lets them
             vreal = vreal.copy()
             vreal[governed.rows] = w_gov
-        if along is not None:
+        if along is not None and (along_steps is None or k < along_steps):
             along += dt * (vdir.real * vreal.real + vdir.imag * vreal.imag)
         p = kernels.euler_step(p, vreal, dt)
         if turning:
@@ -384,13 +386,14 @@ def release_outlook(rel: Imagination, obstacles: Obstacles, goal, params: StackP
 
 
 def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params: StackParams,
-                   shared: bool, static_steps: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                           np.ndarray]:
+                   shared: bool, score_steps: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                          np.ndarray]:
     """The shared barrier (eq:shared_barrier (20), eq:uncertainty_margin (21), eq:behavior_acceptance (22)) and the
     analytic compatibility W~ (eq:analytic_workload (24)) of rollouts ``ro``, all (b, k, i) at once; ``speed``
     ||u_xy|| (B, N+1). Returns h_min, W, deficit (B,) and the margin (B, N+1, M) (see :class:`Imagination`).
-    ``static_steps`` (the rule long_horizon): h_min takes the obstacles that do not move (:func:`moving_obstacles`)
-    over the states k = 0..static_steps only, the moving ones over all k = 0..N."""
+    ``score_steps`` Ns < N (the rule long_horizon): W, the deficit and h_min are those of the first Ns steps (the
+    paper's imagination over Ns steps, to the bit), and h_min also takes the moving obstacles
+    (:func:`moving_obstacles`) over every state k = 0..N."""
     unc, ex = params.uncertainty, params.uncertainty.execution
     N, K, M = params.N, ro.K, len(obstacles)
     B = K.B
@@ -418,13 +421,16 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
                     np.asarray(obstacles.r, float), rel_speed, pred, e_exec, float(kap), shared, float(params.noshared_margin_m),
                     float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s), float(unc.e_zoh_m),
                     float(params.alpha_per_s), float(params.w_eps), grad2, h, margin, wterm)
-    if static_steps is not None and static_steps < N:
+    if score_steps is not None and score_steps < N:
+        Ns = score_steps
+        h_min = h[:, :Ns + 1].reshape(B, -1).min(axis=1)
         moving = moving_obstacles(obstacles, params)
-        h_min = h[:, :static_steps + 1].reshape(B, -1).min(axis=1)
         if moving.any():
             h_min = np.minimum(h_min, h[:, :, moving].reshape(B, -1).min(axis=1))
-    else:
-        h_min = h.reshape(B, -1).min(axis=1)
+        deficit = np.maximum(-h[:, 1:Ns + 1].min(axis=2), 0.0).sum(axis=1)
+        W = np.ascontiguousarray(wterm[:, :Ns]).reshape(B, -1).sum(axis=1)
+        return h_min, W, deficit, margin
+    h_min = h.reshape(B, -1).min(axis=1)
     deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
     W = wterm.reshape(B, -1).sum(axis=1)
     return h_min, W, deficit, margin
@@ -475,16 +481,18 @@ def _barrier_kernel(Pc, Vc, Oc, Ov, r, rel_speed, pred, e_exec, kap, shared, nos
 def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, *,
             modes: tuple[str, ...] = BEHAVIORS, shared: bool = True, current: str | None = None,
             release_v: np.ndarray | None = None, start: tuple[np.ndarray, np.ndarray] | None = None,
-            rules: PlusRules = PAPER_RULES, static_steps: int | None = None) -> Imagination:
+            rules: PlusRules = PAPER_RULES, score_steps: int | None = None) -> Imagination:
     """eq:behavior_rollout (12) rollouts of ``modes`` from ``state`` and their scores (eq:behavior_terms (13),
     eq:behavior_cost (14), eq:behavior_acceptance (22), eq:analytic_workload (24)).
 
     ``shared`` False is BIG-CBF-NoShared: D_i = r_R + r_i + d0 + noshared_margin_m instead of kappa_img m_i.
     ``current`` is b_cur for C_sw (None: no mode retained yet, C_sw = 0). ``release_v``: see :func:`_rollout`.
     ``rules``: our rules beyond the paper (:class:`~bigcbf.params.stack.PlusRules`; default every one off).
-    ``static_steps`` (big-cbf-plus's rule long_horizon; None: the paper's test over every state): the barrier
-    acceptance (eq:behavior_acceptance (22)) takes the obstacles that do not move over the states k <= static_steps
-    only and the moving ones over the whole horizon.
+    ``score_steps`` Ns (big-cbf-plus's rule long_horizon; None: N): the rollouts run N steps, every score
+    (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)) and the barrier acceptance
+    (eq:behavior_acceptance (22)) are those of the first Ns steps, as the paper's imagination over Ns steps would
+    give them, and the acceptance also asks h >= -eps_h of the moving obstacles over all N steps: the longer
+    look-ahead only rejects a candidate that walks into a person's path.
 
     The barrier and compatibility terms do not feed back into the rollout, so they are evaluated after it in one
     shot over (behaviors, steps, obstacles).
@@ -499,26 +507,27 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     goal = np.asarray(goal, float)
     pg = complex(goal[0], goal[1])
     ro = _rollout(state, obstacles, goal, params, tuple(modes),
-                  None if release_v is None else np.asarray(release_v, complex), start, rules)
+                  None if release_v is None else np.asarray(release_v, complex), start, rules, score_steps)
     Pc, Uc, TH = ro.P, ro.U, ro.TH
     U = np.zeros((ro.K.B, N, 3))
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
-    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared, static_steps)
+    Ns = N if score_steps is None else min(int(score_steps), N)
+    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared, Ns if Ns < N else None)
 
-    # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14))
+    # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14)), over the first Ns steps
     P_hist = np.stack([Pc.real, Pc.imag], -1)
-    Pr = np.abs(pg - Pc[:, 0]) - np.abs(pg - Pc[:, N])
-    outside = kernels.outside_goal_region(np.abs(pg - Pc[:, :N]), params.eps_g_m)   # standing still there is arrival
-    F = np.mean((speed[:, :N] < params.v_freeze_mps) & outside, axis=1)
-    dU = np.diff(Uc[:, :N], axis=1)
+    Pr = np.abs(pg - Pc[:, 0]) - np.abs(pg - Pc[:, Ns])
+    outside = kernels.outside_goal_region(np.abs(pg - Pc[:, :Ns]), params.eps_g_m)  # standing still there is arrival
+    F = np.mean((speed[:, :Ns] < params.v_freeze_mps) & outside, axis=1)
+    dU = np.diff(Uc[:, :Ns], axis=1)
     S = np.sum(dU.real ** 2 + dU.imag ** 2, axis=1) + speed[:, 0] ** 2   # u_w = 0 in every behavior
     C = np.array([current is not None and m != current for m in modes], float)
     J = params.w_W * W - params.w_P * Pr + params.w_F * F + params.w_sw * C + params.w_S * S
     dyn = has_dynamic(obstacles)
     available = np.array([m != REVERSE and (dyn or m != "YIELD") for m in modes])
     accepted = available & (h_min >= -params.eps_h_m2)
-    stall = ((params.v_freeze_mps * N * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, N]), params.eps_g_m))
+    stall = ((params.v_freeze_mps * Ns * params.dt_s, kernels.in_goal_region(np.abs(pg - Pc[:, Ns]), params.eps_g_m))
              if rules.speed_governor else None)
     return Imagination(tuple(modes), P_hist, TH, U, h_min, W, Pr, F, S, C, J, available, accepted, deficit, margin,
                        stall, ro.along)

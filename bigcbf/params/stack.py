@@ -334,16 +334,17 @@ class PlusRules:
     - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
       (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
-    - ``long_horizon`` (issue 23): the imagination looks ``long_horizon_s`` ahead (N = long_horizon_s / dt steps
-      of eq:imagined_dynamics; the paper leaves the horizon open and ``big-cbf`` uses the stack's N dt, 1.5 s). A
-      person crossing the robot's path 2 s ahead is then in every rollout before the robot walks into that path;
-      at 1.5 s the rollouts end before the crossing, the robot keeps going and is caught between the person and
-      whatever is behind it (docs/fidelity.md, "The long horizon"). The barrier acceptance (eq:behavior_acceptance
-      (22)) takes the moving obstacles (tracked, dynamic, at least ``cbf_velocity_min_speed_mps``) over the whole
-      horizon and the others over the stack's N steps only: the behaviors re-plan against what stands still at
-      every selection, and over 2.5 s a feedback policy's rollout runs into the next row of posts that it would
-      have passed after the next selection. Everything else that reads the horizon (the scores, the meeting
-      side's two horizons, the relevant obstacle's look-ahead without ``fixed_lookahead``) reads this one.
+    - ``long_horizon`` (issue 23): the imagination's rollouts run ``long_horizon_s`` (N = long_horizon_s / dt
+      steps of eq:behavior_rollout (12)); the paper's N dt is 1.5 s (Table I), which ``big-cbf`` keeps. Every score
+      (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)), the barrier acceptance
+      (eq:behavior_acceptance (22)) and the reverse release stay those of the stack's N steps, to the bit; the
+      longer rollout adds one test: a candidate whose rollout comes within D_i of a moving obstacle (tracked,
+      dynamic, at least ``cbf_velocity_min_speed_mps``) between the two horizons is rejected too. A person crossing
+      the robot's path 2 s ahead is then in the test before the robot walks into that path; at 1.5 s the rollouts
+      end before the crossing, the robot keeps going and is caught between the person and whatever is beside it
+      (docs/fidelity.md, "The long horizon"). What does not move is judged over the stack's horizon: the behaviors
+      re-plan against it at every selection (judged over 2.5 s, a feedback policy's rollout runs into the next row
+      of posts it would have passed after the next selection). The meeting side's "two horizons" read this one.
     - ``last_resort`` (issue 23): the common filter's last resort in big-cbf-plus's episodes, one of
       ``LAST_RESORTS`` (``StackParams.cbf_last_resort``; "slack" is the run's default). "passive" by default: on
       the generated test split it removed the one at-fault contact of "slack" (docs/fidelity.md).

@@ -261,18 +261,18 @@ def test_long_horizon_sees_a_crossing_the_paper_horizon_ends_before_by_hand():
 def test_long_horizon_judges_what_stands_still_over_the_stack_horizon_only_by_hand():
     """The rule long_horizon's barrier acceptance: a post (static, r 0.2 m) at x = 2.3 m on the goal line; GOAL's
     rollout runs x = 0.8 t, so x = 1.2 m at 1.5 s (1.1 m from the post's centre, beyond D_i = 0.56 m here) and
-    x = 2.0 m at 2.5 s (0.3 m: inside): accepted with static_steps = 15 (the stack's N), rejected when every state
+    x = 2.0 m at 2.5 s (0.3 m: inside): accepted with score_steps = 15 (the stack's N), rejected when every state
     of the 25 counts. A person (r 0.2 m) at x = 3.4 m walking at the robot at 0.5 m/s is 1.3 m from it at 1.5 s and
-    0.15 m at 2.5 s: a moving obstacle, judged over all 25 states, static_steps or not."""
+    0.15 m at 2.5 s: a moving obstacle, judged over all 25 states, score_steps or not."""
     plus = BigCbfPlusPlanner(P)
-    assert plus.static_steps == 15 and BigCbfPlanner(P).static_steps is None
-    assert BigCbfPlusPlanner(P, PlusRules(long_horizon=False)).static_steps is None
+    assert plus.score_steps == 15 and BigCbfPlanner(P).score_steps is None
+    assert BigCbfPlusPlanner(P, PlusRules(long_horizon=False)).score_steps is None
     st = RobotState(0.0, 0.0, 0.0)
     post = Obstacles.from_lists([[2.3, 0.0]], r=0.2, ids=[1], static=[True])
     goal_ok = lambda img: dict(zip(img.modes, img.accepted))["GOAL"]      # noqa: E731
     assert goal_ok(imagine(st, post, GOAL, P, rules=PlusRules()))                       # 1.5 s: x <= 1.2 m
     assert not goal_ok(imagine(st, post, GOAL, plus.params, rules=PlusRules()))         # 2.5 s, every state
-    assert goal_ok(imagine(st, post, GOAL, plus.params, rules=PlusRules(), static_steps=15))
+    assert goal_ok(imagine(st, post, GOAL, plus.params, rules=PlusRules(), score_steps=15))
     walker = Obstacles.from_lists([[3.4, 0.0]], v=[[-0.5, 0.0]], r=0.2, ids=[1], static=[False])
     assert goal_ok(imagine(st, walker, GOAL, P, rules=PlusRules()))
-    assert not goal_ok(imagine(st, walker, GOAL, plus.params, rules=PlusRules(), static_steps=15))
+    assert not goal_ok(imagine(st, walker, GOAL, plus.params, rules=PlusRules(), score_steps=15))
