@@ -366,8 +366,8 @@ class PlusRules:
     executed_speed: bool = False  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
     meeting_side: bool = True  # the first side away from a person walking along the path (encounters.py) [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
-    long_horizon: bool = True  # imagine long_horizon_s ahead (off: the stack's N dt) [on/off]
-    long_horizon_s: float = ranged(2.5, 0.1, 10)  # the imagination's horizon with long_horizon [s]
+    long_horizon: bool = True  # rollouts long_horizon_s long; the extra steps test only movers (off: N dt) [on/off]
+    long_horizon_s: float = ranged(2.5, 0.1, 10)  # the rollouts' length with long_horizon [s]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
 
     def __post_init__(self):
