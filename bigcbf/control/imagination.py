@@ -421,18 +421,14 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
                     np.asarray(obstacles.r, float), rel_speed, pred, e_exec, float(kap), shared, float(params.noshared_margin_m),
                     float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s), float(unc.e_zoh_m),
                     float(params.alpha_per_s), float(params.w_eps), grad2, h, margin, wterm)
-    if score_steps is not None and score_steps < N:
-        Ns = score_steps
-        h_min = h[:, :Ns + 1].reshape(B, -1).min(axis=1)
+    Ns = N if score_steps is None else min(score_steps, N)      # Ns = N: the full arrays, the same sums
+    h_min = h[:, :Ns + 1].reshape(B, -1).min(axis=1)
+    if Ns < N:
         moving = moving_obstacles(obstacles, params)
         if moving.any():
             h_min = np.minimum(h_min, h[:, :, moving].reshape(B, -1).min(axis=1))
-        deficit = np.maximum(-h[:, 1:Ns + 1].min(axis=2), 0.0).sum(axis=1)
-        W = np.ascontiguousarray(wterm[:, :Ns]).reshape(B, -1).sum(axis=1)
-        return h_min, W, deficit, margin
-    h_min = h.reshape(B, -1).min(axis=1)
-    deficit = np.maximum(-h[:, 1:].min(axis=2), 0.0).sum(axis=1)
-    W = wterm.reshape(B, -1).sum(axis=1)
+    deficit = np.maximum(-h[:, 1:Ns + 1].min(axis=2), 0.0).sum(axis=1)
+    W = np.ascontiguousarray(wterm[:, :Ns]).reshape(B, -1).sum(axis=1)
     return h_min, W, deficit, margin
 
 
@@ -513,7 +509,7 @@ def imagine(state: RobotState, obstacles: Obstacles, goal, params: StackParams, 
     U[..., 0], U[..., 1] = Uc[:, :N].real, Uc[:, :N].imag
     speed = np.abs(Uc)                                                 # ||u_xy|| (B, N+1)
     Ns = N if score_steps is None else min(int(score_steps), N)
-    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared, Ns if Ns < N else None)
+    h_min, W, deficit, margin = _barrier_terms(ro, speed, obstacles, params, shared, Ns)
 
     # ---- scores (eq:behavior_terms (13), eq:behavior_cost (14)), over the first Ns steps
     P_hist = np.stack([Pc.real, Pc.imag], -1)
