@@ -47,7 +47,7 @@ from bigcbf.params.toml_io import from_dict, to_dict
 from .delay import DelayEstimate, DelayOptions, estimate_delay
 from .execution import (AXES, ExecutionFit, ExecutionOptions, gain_intervals, identified_axes, input_condition,
                         saturated_samples, settled_samples)
-from .limits import LimitOptions, SaturatingModel, fit_model, rim_demand
+from .limits import LimitOptions, SaturatingModel, fit_model
 from .residual import ResidualBound, ResidualOptions, calibrate_bound, conformal_quantile, holdout_mask
 from .signals import intervals, quantile_upper, zoh
 from .timebase import OdomTiming, TimebaseOptions, command_publication, prepare
@@ -388,9 +388,7 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
                         f"unsaturated samples in the calibration blocks, need {MIN_MESSAGES})", file=path)
     fit = ExecutionFit(st.A, st.d, axes, sat[~held] | short[~held], int((use & ~held).sum()), settled_only)
     # A's samples: the settled ones of the calibration blocks, clearly below a wheel limit (limits.fit_static)
-    gain_use = model.settled & ~held
-    if st.v_max is not None:
-        gain_use &= rim_demand(u @ st.A.T + st.d, st.lever_m) <= st.v_max * (1 - opt.limits.kink_margin)
+    gain_use = model.settled & ~held & ~st.near_limit(u, opt.limits.kink_margin)
     gain_ci = gain_intervals(t[gain_use], u[gain_use], v[gain_use], axes, st.A, opt.execution)
     r = v - fit.predict(u)
     speed = np.hypot(u[:, 0], u[:, 1])

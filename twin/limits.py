@@ -151,6 +151,13 @@ class StaticFit:
     def demand(self, u: np.ndarray) -> np.ndarray:
         return rim_demand(np.asarray(u, float) @ self.A.T + self.d, self.lever_m)
 
+    def near_limit(self, u: np.ndarray, margin: float) -> np.ndarray:
+        """True where the command asks more than (1 - margin) of the rim-speed limit: the samples :func:`fit_static`
+        leaves out of A, d (its ``kink_margin``); all False without a limit."""
+        if self.v_max is None:
+            return np.zeros(len(u), bool)
+        return self.demand(u) > self.v_max * (1 - margin)
+
     def saturated(self, u: np.ndarray) -> np.ndarray:
         """True where the command asks more than the rim-speed limit (by 2 %)."""
         if self.v_max is None:

@@ -245,8 +245,7 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
         Uk[N] = u = Uk[N - 1]
         Vk[N] = kernels.execution_velocity_c(rot, u, a_c, b_c, d_c)
         return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, None)
-    along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk,
-                           N if score_steps is None else min(score_steps, N))
+    along = _rollout_steps(policy, governed, Ok, Oc, p, th, N, dt, K, rules, Pk, Vk, Uk, THk, score_steps)
     return _Rollout(K, Pk.T, Vk.T, Uk.T, THk.T, Oc, cov, along)
 
 
