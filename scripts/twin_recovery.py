@@ -83,6 +83,11 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
             g_model = g * np.diag(ref.fit.A)
             row["gains_model_true"] = g_model.tolist()
             row["err_gain_model"] = float(np.max(np.abs(np.diag(cal.fit.A)[ax] / g_model[ax] - 1)))
+            # the parts of each latency (dead time, first-order lag per axis), of this drive and of the reference's
+            row["dead_s"], row["lag_s"] = dyn.latency_s.tolist(), dyn.axis_lags_s.tolist()
+            row["ref_dead_s"] = ref.model.dynamic.latency_s.tolist()
+            row["ref_lag_s"] = ref.model.dynamic.axis_lags_s.tolist()
+            row["jitter_s"], row["residual_max"] = prof.latency_jitter_s, list(prof.residual_max)
             lat_ax = lat_true + own
             ci_l, ci_g = cal.latency_ci_s, cal.gain_ci
             row["latency_ci_s"], row["gain_ci"] = ci_l.tolist(), ci_g.tolist()

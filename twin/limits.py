@@ -221,17 +221,22 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
             break
         A, d = A_new, d_new
     vm, k, _ = best
+    if vm is not None:
+        A, d, vm, k = _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id, levers)
     p = u @ A.T + d
     D = rim_demand(p, k)
     beyond = D > 1.02 * vm if vm is not None else np.zeros(len(u), bool)
     n_sat = int(beyond.sum())
     pred = saturate(p, vm, k) if vm is not None else p
     cost_sat = float(cost(pred)) if vm is not None else cost_lin
-    # the limit must explain the samples beyond it (their error against the linear model cut by ``improvement``)
-    # and be significant against the noise of the rest (the cut at least 30 times the mean error per sample)
-    lin = u @ A_lin.T + d_lin
+    # the limit must explain the samples beyond it (their error against the linear law of the samples below it,
+    # A u + d, cut by ``improvement``) and be significant against the noise of the rest (the cut of the total error
+    # against a linear model fitted on every sample at least 30 times the mean error per sample). The linear law
+    # of the beyond samples is the one below the kink, not the fit across it: that fit lowers its gains to meet the
+    # saturated samples half-way, and against it a limit that 15 % of the samples reach (a 0.86 m/s limit, wheels
+    # asked up to 0.99 m/s) cut their error by only 21 %
     sc_idx = sc[idx]
-    e_lin_b = float((((v[beyond][:, idx] - lin[beyond][:, idx]) / sc_idx) ** 2).sum())
+    e_lin_b = float((((v[beyond][:, idx] - p[beyond][:, idx]) / sc_idx) ** 2).sum())
     e_sat_b = float((((v[beyond][:, idx] - pred[beyond][:, idx]) / sc_idx) ** 2).sum())
     noise = cost_sat / max(len(u), 1)
     reached = (vm is not None and n_sat >= max(opt.min_saturated, opt.min_saturated_fraction * len(u))
@@ -247,6 +252,41 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
                      if len(u) else 0.0, n_sat, cost_lin, cost_sat, A_lin, d_lin, levers,
                      np.array([np.nan if c[0] is None else c[0] for c in cands]) if reached else np.zeros(0),
                      np.array([c[2] for c in cands]) if reached else np.zeros(0), len(u))
+
+
+def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndarray):
+    """A, d, the limit and the lever by one least-squares fit of the saturating model on every settled sample (the
+    Gaussian maximum-likelihood fit of step 1), started from the alternating search's answer. The alternation
+    (limit on a grid, then A, d on the samples below the kink) stops where neither half alone improves: with a
+    gain above 1 on an axis that often saturates (a 1.14 vx gain, half the samples beyond a 0.53 m/s limit) the
+    samples left below the kink were the small commands, and it stopped at a vx gain of 1.22 and a lever of 0.16 m
+    whose error the truth (1.14, 0.165 m) beat by 6 %; the joint fit reached 1.134. The lever stays inside the
+    grid's range (fixed when the log cannot identify it); a fit that does not lower the error is not taken."""
+    from scipy.optimize import least_squares as nls
+    idx = np.flatnonzero(axes)
+    m = len(idx)
+
+    def unpack(x):
+        A_ = np.zeros((3, 3))
+        A_[np.ix_(idx, idx)] = x[:m * m].reshape(m, m)
+        d_ = np.zeros(3)
+        d_[idx] = x[m * m:m * m + m]
+        return A_, d_, float(x[m * m + m]), float(x[m * m + m + 1]) if lever_id else float(k)
+
+    def res(x):
+        A_, d_, vm_, k_ = unpack(x)
+        return ((v[:, idx] - saturate(u @ A_.T + d_, vm_, k_)[:, idx]) / sc[idx]).ravel()
+
+    x0 = np.r_[A[np.ix_(idx, idx)].ravel(), d[idx], vm, [k] if lever_id else []]
+    lo = np.r_[np.full(m * m + m, -np.inf), 1e-3, [levers.min()] if lever_id else []]
+    hi = np.r_[np.full(m * m + m, np.inf), np.inf, [levers.max()] if lever_id else []]
+    try:
+        r = nls(res, np.clip(x0, lo, hi), bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=200)
+    except (ValueError, np.linalg.LinAlgError):
+        return A, d, vm, k
+    if not r.x.size or not np.isfinite(r.x).all() or float(r.fun @ r.fun) >= float(res(x0) @ res(x0)):
+        return A, d, vm, k
+    return unpack(r.x)
 
 
 # --- the dynamic part ------------------------------------------------------------------------------------------
