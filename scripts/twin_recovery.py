@@ -44,7 +44,7 @@ draw_profile = random_profile
 REF_LATENCY_S = 0.1      # the reference drive's latency (docstring) [s]
 
 
-def run(n: int, seed: int, duration: float) -> list[dict]:
+def run(n: int, seed: int, duration: float, start: int = 0) -> list[dict]:
     rng = np.random.default_rng(seed)
     rows = []
     with tempfile.TemporaryDirectory(prefix="bigcbf-recovery-") as tmp:
@@ -54,6 +54,8 @@ def run(n: int, seed: int, duration: float) -> list[dict]:
         L0 = float(np.nanmedian(ideal.latency_s))
         for i in range(n):
             prof = draw_profile(rng)
+            if i < start:                   # drawn, so that profile i is the same whatever the start
+                continue
             path = Path(tmp) / f"p{i}.mcap"
             t0 = time.perf_counter()
             record_calibration(prof, path, seed=seed + 1 + i, duration_s=duration)
@@ -133,8 +135,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--duration", type=float, default=80.0)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--start", type=int, default=0, help="run profiles start..n-1 (to split a run)")
     args = ap.parse_args()
-    rows = run(args.n, args.seed, args.duration)
+    rows = run(args.n, args.seed, args.duration, args.start)
     s = summary(rows)
     for k, v in s.items():
         if isinstance(v, dict) and "max" in v:

@@ -93,11 +93,13 @@ def identified_axes(u: np.ndarray, opt: ExecutionOptions = ExecutionOptions()) -
 def input_condition(u: np.ndarray, axes: np.ndarray) -> float:
     """Condition number of the standardised regressors [u_k for identified k, 1]: large (> ~30) when the log moves
     two axes together (e.g. vx and wz always in the same proportion), so that their cross gains cannot be told
-    apart even though each axis is excited."""
+    apart even though each axis is excited. Rows with an unknown command (NaN: odometry before the first command
+    once delayed) are left out."""
     idx = np.flatnonzero(axes)
     if len(idx) == 0:
         return 1.0
     x = np.asarray(u, float)[:, idx]
+    x = x[np.isfinite(x).all(axis=1)]
     x = (x - x.mean(axis=0)) / np.maximum(x.std(axis=0), 1e-12)
     return float(np.linalg.cond(x)) if len(x) > len(idx) else float("inf")
 

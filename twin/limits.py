@@ -23,11 +23,13 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    on a grid (0.05 to 0.6 m; fixed when the log does not move both translation and yaw) and v_max on a grid of the
    samples' rim demands max|R p|, the squared error of the saturating model (per axis, scaled by the command's
    spread); the best pair, the samples that ask more than 95 % of the limit left out (near the kink a small error in
-   the limit would bias the gains), A and d refitted, three times. The limit is reported
+   the limit would bias the gains), A and d refitted, three times; then A, d, the limit and the lever together by
+   one least-squares fit of the saturating model on every settled sample (:func:`_refine_jointly`: the
+   alternation can stop where neither half alone improves). The limit is reported
    when it saturates at least ``min_saturated`` samples (and ``min_saturated_fraction`` of them), cuts the error of
-   those samples against a linear model fitted on every settled sample by ``improvement``, and cuts the total
-   error by at least 30 times the mean error per sample (a change the noise cannot make); otherwise the log does
-   not reach one.
+   those samples against the linear law of the samples below it (A u + d) by ``improvement``, and cuts the total
+   error against a linear model fitted on every settled sample by at least 30 times the mean error per sample (a
+   change the noise cannot make); otherwise the log does not reach one.
 2. dynamic part, on every sample of the calibration blocks: the model simulated on a 10 ms grid (the commands
    box-averaged over each step and the prediction interpolated to the odometry times, so that the fit moves
    smoothly with L) for a batch of candidates at once: a common dead time L and lag T without acceleration limit;

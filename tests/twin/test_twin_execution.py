@@ -156,3 +156,16 @@ def test_gain_intervals_by_block_not_by_sample():
     assert np.all((ci[[0, 2], 1] - ci[[0, 2], 0]) / 2 > 2 * iid_half)
     short = t < 10.0
     assert np.isnan(gain_intervals(t[short], u[short], v[short], axes, A_all)).all()
+
+
+def test_input_condition_leaves_out_unknown_commands():
+    """Odometry before the first command has no command once delayed (NaN): input_condition leaves those rows out
+    (a settled sample at the log's start made numpy's SVD fail: a traceback from ``bigcbf calibrate``)."""
+    from twin.execution import input_condition
+    rng = np.random.default_rng(0)
+    u = rng.uniform(-1, 1, (200, 3))
+    axes = np.ones(3, bool)
+    clean = input_condition(u, axes)
+    with_nan = np.vstack([np.full((5, 3), np.nan), u])
+    assert input_condition(with_nan, axes) == pytest.approx(clean)
+    assert input_condition(np.full((5, 3), np.nan), axes) == float("inf")
