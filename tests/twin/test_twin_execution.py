@@ -1,5 +1,6 @@
 """Execution model eq:execution (1) (twin.execution): least squares, identified axes, saturation, settled samples."""
 import numpy as np
+import pytest
 
 from twin.execution import (ExecutionOptions, fit_execution, identified_axes, least_squares, runs_at_least,
                             saturated_samples, settled_samples)
