@@ -2,8 +2,9 @@
 
     .venv/bin/python scripts/twin_latency_bias.py [--seeds 11 12 13] [--accel 3.0]
 
-A synthetic robot with exactly the structure the dynamic fit assumes (twin.limits: dead time, rim-speed limit,
-rim-acceleration limit, first-order wheels with a 15 ms lag, 20-ms averaged odometry at 50 Hz), driven by the
+A synthetic robot with exactly the structure the dynamic fit assumes (twin.limits: dead time, the simulated
+firmware's wheel limits (bigcbf.sim.firmware.WheelLimiter), first-order wheels with a 15 ms lag, 20-ms averaged
+odometry at 50 Hz), driven by the
 calibration drive's commands (twin.drive.segments, 80 s at 20 Hz) and, like the simulator's firmware
 (bigcbf.sim.firmware), with the latency jitter on each command's delay and the execution residual added to the
 target before the wheel limits. twin.limits.fit_dynamic is given the true static part, so only the dynamics are
@@ -16,8 +17,10 @@ import argparse
 
 import numpy as np
 
+from bigcbf.params.robot import RobotProfile
+from bigcbf.sim.firmware import WheelLimiter
 from twin.drive import DriveLimits, segments
-from twin.limits import DynamicProblem, StaticFit, fit_dynamic, rim_matrix
+from twin.limits import DynamicProblem, StaticFit, fit_dynamic
 
 LATENCY_S, V_MAX, LEVER_M, WHEEL_LAG_S = 0.1, 0.6, 0.1645, 0.015
 
@@ -38,17 +41,12 @@ def respond(t_cmd, u_cmd, jitter, residual, accel, rng, h=0.001):
     target = u_cmd + rng.uniform(-1, 1, (n, 3)) * residual          # the residual before the limits
     tg = np.arange(0, t_cmd[-1] + 1, h)
     k = np.searchsorted(apply_at, tg, side="right") - 1
-    R = rim_matrix(LEVER_M)
-    x, y, out = np.zeros(3), np.zeros(3), np.zeros((len(tg), 3))
+    # the simulated firmware's own wheel limits (rim-speed saturation, rim-acceleration limit)
+    limiter = WheelLimiter(RobotProfile(wheel_speed_max_mps=V_MAX, wheel_accel_max_mps2=accel), LEVER_M)
+    y, out = np.zeros(3), np.zeros((len(tg), 3))
     alpha = 1 - np.exp(-h / WHEEL_LAG_S)
     for i in range(len(tg)):
-        p = target[k[i]] if k[i] >= 0 else np.zeros(3)
-        D = np.abs(R @ p).max()
-        p = p * min(1.0, V_MAX / D) if D > 0 else p
-        step = p - x
-        peak = np.abs(R @ step).max()
-        x = x + step * min(1.0, accel * h / peak) if peak > 0 else x
-        y = y + (x - y) * alpha
+        y = y + (limiter.update(tg[i], target[k[i]] if k[i] >= 0 else np.zeros(3)) - y) * alpha
         out[i] = y
     ts = np.arange(0.02, tg[-1], 0.02)
     c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h

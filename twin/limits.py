@@ -263,15 +263,15 @@ def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndar
     gain above 1 on an axis that often saturates (a 1.14 vx gain, half the samples beyond a 0.53 m/s limit) the
     samples left below the kink were the small commands, and it stopped at a vx gain of 1.22 and a lever of 0.16 m
     whose error the truth (1.14, 0.165 m) beat by 6 %; the joint fit reached 1.134. The lever stays inside the
-    grid's range (fixed when the log cannot identify it); a fit that does not lower the error is not taken."""
+    grid's range (fixed when the log cannot identify it); a fit that does not lower the error is not taken. Only
+    the identified axes' block of A and d is fitted: the other rows keep what ``least_squares`` gave them (identity)."""
     from scipy.optimize import least_squares as nls
     idx = np.flatnonzero(axes)
     m = len(idx)
 
     def unpack(x):
-        A_ = np.zeros((3, 3))
+        A_, d_ = A.copy(), d.copy()
         A_[np.ix_(idx, idx)] = x[:m * m].reshape(m, m)
-        d_ = np.zeros(3)
         d_[idx] = x[m * m:m * m + m]
         return A_, d_, float(x[m * m + m]), float(x[m * m + m + 1]) if lever_id else float(k)
 
@@ -279,14 +279,15 @@ def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndar
         A_, d_, vm_, k_ = unpack(x)
         return ((v[:, idx] - saturate(u @ A_.T + d_, vm_, k_)[:, idx]) / sc[idx]).ravel()
 
-    x0 = np.r_[A[np.ix_(idx, idx)].ravel(), d[idx], vm, [k] if lever_id else []]
     lo = np.r_[np.full(m * m + m, -np.inf), 1e-3, [levers.min()] if lever_id else []]
     hi = np.r_[np.full(m * m + m, np.inf), np.inf, [levers.max()] if lever_id else []]
+    x0 = np.clip(np.r_[A[np.ix_(idx, idx)].ravel(), d[idx], vm, [k] if lever_id else []], lo, hi)
+    r0 = res(x0)
     try:
-        r = nls(res, np.clip(x0, lo, hi), bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=200)
+        r = nls(res, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=200)
     except (ValueError, np.linalg.LinAlgError):
         return A, d, vm, k
-    if not r.x.size or not np.isfinite(r.x).all() or float(r.fun @ r.fun) >= float(res(x0) @ res(x0)):
+    if not np.isfinite(r.x).all() or float(r.fun @ r.fun) >= float(r0 @ r0):
         return A, d, vm, k
     return unpack(r.x)
 

@@ -58,6 +58,9 @@ def test_differential_drive_limit_without_vy():
     st = fit_static(u, v, np.array([True, False, True]))
     assert st.v_max == pytest.approx(0.3, rel=0.05) and st.lever_m == pytest.approx(0.08, abs=0.02)
     np.testing.assert_allclose(np.diag(st.A)[[0, 2]], [1.0, 1.0], atol=0.03)
+    # vy is not identified: its row keeps the identity (execution.least_squares), the joint fit leaves it alone
+    np.testing.assert_array_equal(st.A[1], [0.0, 1.0, 0.0])
+    assert st.d[1] == 0.0
 
 
 def test_best_candidate_is_the_concentrated_likelihood_by_hand():
