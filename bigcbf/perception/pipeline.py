@@ -10,7 +10,10 @@ Per scan, with the robot pose (odometry) at the scan's stamp:
    predicted circles of two confirmed tracks, e.g. a walker passing a post, two walkers side by side) or a walker
    inside an extended cluster (a walker along a wall) is split along them. Without it both tracks starved while the
    objects were close: crowd_00001 (dev), two walkers side by side made one 0.76 m cluster for a second, both
-   tracks were deleted and a walker was re-acquired 0.46 m from the robot as a static object;
+   tracks were deleted and a walker was re-acquired 0.46 m from the robot as a static object. Before that, the runs
+   of an extended cluster's points that lie where earlier scans saw free space (something that moved there: a
+   walker who came into view along a wall, never tracked) are split out as clusters of their own
+   (``freespace.FreeSpace.split``, free-space carving);
 3. a cluster longer than compact_max_extent_m is a WALL (walls, long or large obstacles). It is not forced into a
    circle nor tracked: it is represented by points (``geometry.wall_candidates``): its point nearest to the robot,
    points every wall_spacing_m along it and its two ends. Returns that cannot be trusted as one whole object are
@@ -57,7 +60,7 @@ from the output entirely before); the circles are what the CBF keeps one row eac
 Limitations (documented choices): a scan is taken as instantaneous (no per-beam motion correction); wall points come
 from the current scan only (no map) or a track's last cluster; an object closer than the breakpoint distance
 (~0.2-0.3 m at 2 m) to a wall or to another object that is not yet tracked merges with it into one cluster for
-those scans (the merged returns are wall points); a moving pedestrian is reported static (v = 0) until its speed
+those scans (the merged returns are wall points) unless it has moved into space that earlier scans saw free; a moving pedestrian is reported static (v = 0) until its speed
 has exceeded v_dynamic_mps and dynamic_sigma standard deviations for n_dynamic updates (three updates for a
 walker measured well, i.e. near the robot).
 """
@@ -73,6 +76,7 @@ from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
 from .geometry import (Cluster, _pairwise, cluster_points, compact_mask, measure_clusters, scan_to_points,
                        select_wall_points, wall_candidates_many, wall_point_covariance)
+from .freespace import FreeSpace
 from .tracker import Tracker
 
 
@@ -128,6 +132,7 @@ class Perception:
     def __init__(self, params: PerceptionParams = PerceptionParams()):
         self.params = params
         self.tracker = Tracker(params)
+        self.free_space = FreeSpace(params)
         self._last_ms = 0.0
         self._stamp: float | None = None
         #: The wall points of the last update (odom), for debugging and visualisation.
@@ -136,6 +141,7 @@ class Perception:
     def reset(self) -> None:
         """Forget every track (ids restart at 0)."""
         self.tracker.reset()
+        self.free_space.reset()
         self._stamp = None
         self._last_ms = 0.0
         self.last_wall_points = np.zeros((0, 2))
@@ -228,7 +234,15 @@ class Perception:
         sp = scan_to_points(scan, pose, pr)
         self.tracker.predict(float(scan.stamp))
         clusters = cluster_points(sp, pr)
-        clusters, is_compact = self._segment(sp, clusters, compact_mask(sp, clusters, pr))
+        is_compact = compact_mask(sp, clusters, pr)
+        clusters, flags = self.free_space.split(sp, clusters, is_compact, float(scan.stamp))   # freespace.py
+        if len(flags) != len(is_compact) or any(f is None for f in flags):
+            new = [k for k, f in enumerate(flags) if f is None]
+            for k, c in zip(new, compact_mask(sp, [clusters[k] for k in new], pr)):
+                flags[k] = bool(c)
+            is_compact = np.array(flags, bool)
+        self.free_space.add(scan, sp, float(pose[2]) + pr.laser_yaw_rad)
+        clusters, is_compact = self._segment(sp, clusters, is_compact)
         walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
         candidates = [cl for cl, c in zip(clusters, is_compact) if c]
         centers, radii, covs, rounds, compact = [], [], [], [], []
