@@ -52,6 +52,7 @@ class PerceptionParams:
     #: A compact cluster cut at one of its ends by a nearer return on the adjacent beam (partly hidden) is kept
     #: as a track measurement only when it is a clean arc (the circle fit is accepted); otherwise (e.g. a piece of
     #: wall visible between pedestrians, whose apparent centre would slide) it becomes wall points.
+
     #: Free-space carving (``bigcbf/perception/freespace.py``): points of an extended cluster that lie where up to
     #: three earlier scans, from free_space_history_s ago and two in between, saw beyond them by more than
     #: free_space_margin_m (plus three range-noise sigmas) are split out as objects of their own (a walker against a

@@ -9,8 +9,9 @@ robot for 1.5 s without a track, while big-cbf-plus stepped towards that wall, a
 Free-space carving (the "detection and tracking of moving objects" idea of Wang, Thorpe & Thrun 2003, here on raw
 scans instead of a map): a return that lies where an earlier scan's beam passed on, beyond it, to a farther return
 is on something that has moved into that space. For every point of an extended cluster the test looks at up to
-three earlier scans (the stored scans nearest to history/3, 2 history/3 and history ago), each from its own sensor pose in odom: the point's bearing falls between two beams of that scan; if both
-returned (finite, within range limits) and both ranges exceed the point's range by more than
+three earlier scans (the stored scans nearest to history/3, 2 history/3 and history ago), each from its own sensor
+pose in odom: the point's bearing falls between two beams of that scan; if both returned (finite, within range
+limits, as ``geometry.scan_to_points`` takes them) and both ranges exceed the point's range by more than
 ``free_space_margin_m`` plus three range-noise standard deviations, the point is "in free space". Taking the
 nearer of the two bracketing beams keeps a wall seen at a grazing angle out of it (its range grows monotonically
 across the bracket, so one of the two is nearer than the point). A beam without a return is no evidence (it may be
@@ -20,9 +21,9 @@ Runs of consecutive points in free space (one missing point bridged), with at le
 compact_max_extent_m across, are split out of their extended cluster as clusters of their own, marked partly hidden:
 the usual tests then decide what they are. A clean arc is measured as a circle and tracked (and, once its track is
 dynamic, track-aided segmentation keeps it apart from the wall); anything else (a piece of wall moved by odometry
-error) is turned back into wall points by the rule for partly hidden clusters that are not a clean arc. The pieces of the
-cluster on either side of each run stay wall points, however short: a few returns of wall left beside a walker,
-measured as a small circle, became a phantom track sliding along with the walker (corridor_00012).
+error) is turned back into wall points by the rule for partly hidden clusters that are not a clean arc. The pieces
+of the cluster on either side of each run stay wall points, however short: a few returns of wall left beside a
+walker, measured as a small circle, became a phantom track sliding along with the walker (corridor_00012).
 
 Limitations: a walker moving slower than free_space_margin_m per history (0.15 m/s with the defaults) is found only
 where it has moved by more than the margin; the test uses odometry poses, so an odometry error above the margin
@@ -38,7 +39,7 @@ import numpy as np
 from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import LaserScan
-from .geometry import Cluster, ScanPoints
+from .geometry import Cluster, ScanPoints, compact_mask
 
 
 @kernel
@@ -52,6 +53,9 @@ def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, margin, sigma0, s
     H = sensors.shape[0]
     out = np.zeros(n, np.bool_)
     two_pi = 2.0 * math.pi
+    full = np.empty(H, np.bool_)                    # a 360-degree scan: its last beam wraps to its first
+    for h in range(H):
+        full[h] = n_beams[h] * inc[h] >= two_pi - 1e-6
     for i in range(n):
         need = margin + 3.0 * (sigma0 + sigma_frac * ranges[i])
         for h in range(H):
@@ -59,12 +63,10 @@ def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, margin, sigma0, s
             dy = xy[i, 1] - sensors[h, 1]
             r = math.sqrt(dx * dx + dy * dy)
             a = (math.atan2(dy, dx) - a0[h]) % two_pi
-            f = a / inc[h]
-            j = int(math.floor(f))
+            j = int(math.floor(a / inc[h]))
             nb = n_beams[h]
-            full = nb * inc[h] >= two_pi - 1e-6
             j2 = j + 1
-            if full:
+            if full[h]:
                 j = j % nb
                 j2 = j2 % nb
             elif j < 0 or j2 >= nb:
@@ -89,11 +91,11 @@ class FreeSpace:
         self._scans.clear()
 
     def add(self, scan: LaserScan, sp: ScanPoints, theta_odom: float) -> None:
-        """Remember ``scan`` (its points ``sp``; the laser's yaw in odom ``theta_odom`` [rad]) for later tests."""
-        r = np.asarray(scan.ranges, dtype=float)
-        r = np.where(np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max), r, np.nan)
-        self._scans.append((float(scan.stamp), sp.sensor.copy(), float(scan.angle_min) + theta_odom,
-                            float(scan.angle_increment), r))
+        """Remember ``scan`` for later tests: its valid returns ``sp`` (``geometry.scan_to_points``; the other beams
+        NaN) and the laser's yaw in odom ``theta_odom`` [rad]."""
+        r = np.full(sp.n_beams, np.nan)
+        r[sp.beam] = sp.ranges
+        self._scans.append((float(scan.stamp), sp.sensor, float(scan.angle_min) + theta_odom, sp.angle_increment, r))
         keep = 1.5 * self.params.free_space_history_s          # the oldest scan a test may use
         while self._scans and self._scans[0][0] < scan.stamp - keep:
             self._scans.popleft()
@@ -112,16 +114,16 @@ class FreeSpace:
                 picked.append(best)
         return picked
 
-    def split(self, sp: ScanPoints, clusters: list, is_compact: np.ndarray, stamp: float) -> tuple[list, list]:
+    def split(self, sp: ScanPoints, clusters: list, is_compact: np.ndarray,
+              stamp: float) -> tuple[list, np.ndarray]:
         """The extended clusters' runs of points in free space split out (module docstring). Returns the clusters
-        and, for each, its compact flag: None for a run split out (to be computed), False for the wall's pieces."""
+        and their compact flags (``geometry.compact_mask`` for a run split out; the wall's pieces stay extended)."""
         pr = self.params
-        flags: list = [bool(c) for c in is_compact]
         if pr.free_space_history_s <= 0 or not clusters or bool(np.all(is_compact)):
-            return clusters, flags
+            return clusters, is_compact
         earlier = self._earlier(stamp)
         if not earlier:
-            return clusters, flags
+            return clusters, is_compact
         ext = [k for k, c in enumerate(is_compact) if not c]
         idx = np.concatenate([clusters[k].idx for k in ext])
         width = max(len(s[4]) for s in earlier)
@@ -133,31 +135,35 @@ class FreeSpace:
                              np.array([s[3] for s in earlier]), past, np.array([len(s[4]) for s in earlier], np.int64),
                              float(pr.free_space_margin_m), float(pr.range_sigma_m), float(pr.range_sigma_frac))
         if not free.any():
-            return clusters, flags
-        out, out_flags, start = [], [], 0
-        by_cluster = {}
+            return clusters, is_compact
+        runs, start = {}, 0
         for k in ext:
             n = len(clusters[k].idx)
-            by_cluster[k] = free[start:start + n]
+            runs[k] = _runs(free[start:start + n], sp.xy[clusters[k].idx], pr)
             start += n
+        if not any(runs.values()):
+            return clusters, is_compact
+        out, flags = [], []                     # flags: compact, extended (False) or a run to measure (None)
         for k, cl in enumerate(clusters):
-            runs = _runs(by_cluster[k], sp.xy[cl.idx], pr) if k in by_cluster else []
-            if not runs:
+            if not runs.get(k):
                 out.append(cl)
-                out_flags.append(flags[k])
+                flags.append(bool(is_compact[k]))
                 continue
             prev = 0
-            for lo, hi in runs:
+            for lo, hi in runs[k]:
                 if lo > prev:
                     out.append(Cluster(cl.idx[prev:lo], cl.occluded))
-                    out_flags.append(False)                # the wall's pieces stay wall points
+                    flags.append(False)                    # the wall's pieces stay wall points
                 out.append(Cluster(cl.idx[lo:hi], True))
-                out_flags.append(None)
+                flags.append(None)
                 prev = hi
             if prev < len(cl.idx):
                 out.append(Cluster(cl.idx[prev:], cl.occluded))
-                out_flags.append(False)
-        return out, out_flags
+                flags.append(False)
+        new = [i for i, f in enumerate(flags) if f is None]
+        for i, c in zip(new, compact_mask(sp, [out[i] for i in new], pr)):
+            flags[i] = bool(c)
+        return out, np.array(flags, bool)
 
 
 def _runs(free: np.ndarray, pts: np.ndarray, pr: PerceptionParams) -> list[tuple[int, int]]:

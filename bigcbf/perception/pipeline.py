@@ -60,9 +60,9 @@ from the output entirely before); the circles are what the CBF keeps one row eac
 Limitations (documented choices): a scan is taken as instantaneous (no per-beam motion correction); wall points come
 from the current scan only (no map) or a track's last cluster; an object closer than the breakpoint distance
 (~0.2-0.3 m at 2 m) to a wall or to another object that is not yet tracked merges with it into one cluster for
-those scans (the merged returns are wall points) unless it has moved into space that earlier scans saw free; a moving pedestrian is reported static (v = 0) until its speed
-has exceeded v_dynamic_mps and dynamic_sigma standard deviations for n_dynamic updates (three updates for a
-walker measured well, i.e. near the robot).
+those scans (the merged returns are wall points) unless it has moved into space that earlier scans saw free; a
+moving pedestrian is reported static (v = 0) until its speed has exceeded v_dynamic_mps and dynamic_sigma standard
+deviations for n_dynamic updates (three updates for a walker measured well, i.e. near the robot).
 """
 from __future__ import annotations
 
@@ -234,13 +234,7 @@ class Perception:
         sp = scan_to_points(scan, pose, pr)
         self.tracker.predict(float(scan.stamp))
         clusters = cluster_points(sp, pr)
-        is_compact = compact_mask(sp, clusters, pr)
-        clusters, flags = self.free_space.split(sp, clusters, is_compact, float(scan.stamp))   # freespace.py
-        if len(flags) != len(is_compact) or any(f is None for f in flags):
-            new = [k for k, f in enumerate(flags) if f is None]
-            for k, c in zip(new, compact_mask(sp, [clusters[k] for k in new], pr)):
-                flags[k] = bool(c)
-            is_compact = np.array(flags, bool)
+        clusters, is_compact = self.free_space.split(sp, clusters, compact_mask(sp, clusters, pr), float(scan.stamp))
         self.free_space.add(scan, sp, float(pose[2]) + pr.laser_yaw_rad)
         clusters, is_compact = self._segment(sp, clusters, is_compact)
         walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
