@@ -5,6 +5,11 @@
   and pedestrian bodies) from its initial state with constant wheel targets, as many steps as the episode took,
   timed in the same run right after it: the floor the episode loop could reach.
 - ``episode_physics_ratio``: the first over the second (1 would mean the stack and the loop cost nothing).
+- ``episode_replay_realtime_factor``: the episode's own physics stepped again without the stack, block by block
+  with its recorded wheel targets and pedestrian positions (``sim.perf.replay_realtime_factor``): the same
+  contacts and solver work as the episode (the drive at constant targets has fewer contacts: it is the cheaper
+  physics), timed in the same run.
+- ``episode_replay_ratio``: ``episode_realtime_factor`` over that: the stack's and the loop's share alone.
 - ``episode_route_tick_mean_ms`` (with the route layer on, ``big-cbf-plus`` in ``bigcbf perf``): the route
   layer's time (map updates, replans, look-ahead points) per control tick of that episode.
 """
@@ -14,21 +19,25 @@ from .episode import Episode
 from .control.route import RouteParams
 from .params.stack import SIMULATION
 from .scenario import load_scenario
-from .sim.perf import bare_physics_realtime_factor
+from .sim.perf import bare_physics_realtime_factor, replay_realtime_factor
 
 
 def episode_figures(method: str, quick: bool = False, route: RouteParams | None = None) -> dict:
     """The figures of the module docstring for one ``method`` episode (``route``: its route layer, off by default)."""
     sc = load_scenario("single_person_crossing" if quick else "mixed_dense_traffic", 0)
     ep = Episode(sc, method, 0, SIMULATION, perception="lidar", route=route)
+    log = ep.world.record_blocks()
     res = ep.run()
     model = ep.world.model
     n_steps = max(1, int(round(res.sim_time_s / model.opt.timestep)))
     episode_rf = res.sim_time_s / res.wall_time_s
     physics_rf = bare_physics_realtime_factor(model, n_steps)
+    replay_rf, _ = replay_realtime_factor(model, log)
     out = {"episode_realtime_factor": round(episode_rf, 2),
            "episode_physics_realtime_factor": round(physics_rf, 2),
            "episode_physics_ratio": round(episode_rf / physics_rf, 3),
+           "episode_replay_realtime_factor": round(replay_rf, 2),
+           "episode_replay_ratio": round(episode_rf / replay_rf, 3),
            "episode_scenario": sc.name,
            "episode_sim_time_s": res.sim_time_s}
     if ep.route is not None:              # the route layer's own share, per control tick of this episode

@@ -20,6 +20,8 @@ def test_perf_episode_and_its_own_bare_physics_from_one_run(capsys):
     ep, phys = out["episode_realtime_factor"], out["episode_physics_realtime_factor"]
     assert ep > 0 and phys > 0 and out["episode_sim_time_s"] > 1.0
     assert out["episode_physics_ratio"] == pytest.approx(ep / phys, rel=0.02, abs=2e-3)
+    replay = out["episode_replay_realtime_factor"]           # the same run's own physics, replayed without the stack
+    assert replay > 0 and out["episode_replay_ratio"] == pytest.approx(ep / replay, rel=0.02, abs=2e-3)
 
 
 def test_unknown_subcommand_and_bad_argument_exit_2(capsys):

@@ -4,7 +4,8 @@ Every timing figure ``X_ms`` is also given as ``X_steps``: its ratio to the bare
 (``physics_step_us``: ``bigcbf.sim.perf``, the robot alone stepping; measured here when ``--only`` leaves that
 provider out), so figures from a loaded or a slower machine compare: ``imagination_p95_steps``,
 ``perception_steps``, ``cbf_qp_p95_steps``; ``episode_physics_ratio`` (the episode's real-time factor over the bare
-physics of its own model, ``bigcbf.episode_perf``) is a ratio already. ``by_method`` puts these four figures of
+physics of its own model, ``bigcbf.episode_perf``) and ``episode_replay_ratio`` (over its own physics replayed
+without the stack) are ratios already. ``by_method`` puts these five figures of
 each method in :data:`SIDE_BY_SIDE` side by side; a method without its own figures says why ("not available"),
 never a number it did not measure.
 """
@@ -28,7 +29,8 @@ BENCHES = [
 ]
 
 #: The figures ``by_method`` compares, in step ratios (module docstring).
-RATIO_FIGURES = ("imagination_p95_steps", "perception_steps", "cbf_qp_p95_steps", "episode_physics_ratio")
+RATIO_FIGURES = ("imagination_p95_steps", "perception_steps", "cbf_qp_p95_steps", "episode_physics_ratio",
+                 "episode_replay_ratio")
 
 #: The methods reported side by side in ``by_method``, each with where its figures come from: None for the
 #: providers above (they measure big-cbf), else "module:function" -> function(quick) -> dict with the same

@@ -25,6 +25,25 @@ def bare_physics_realtime_factor(model: mujoco.MjModel, n_steps: int) -> float:
     return n_steps * model.opt.timestep / (time.perf_counter() - t0)
 
 
+def replay_realtime_factor(model: mujoco.MjModel, log) -> tuple[float, np.ndarray]:
+    """Simulated seconds per wall second of the physics of a recorded run (``SimWorld.record_blocks``) stepped
+    again without the stack: from the recorded state, each block's wheel targets and mocap positions written and
+    ``mj_step`` called for its steps, nothing else. The floor the episode loop could reach for the very physics it
+    ran (its contacts and solver work, which a drive at constant wheel targets does not have). Also returns the
+    final qpos (the replay is the run's physics to the bit: ``tests/sim/test_sim_perf.py``)."""
+    d = mujoco.MjData(model)
+    mujoco.mj_setState(model, d, log.state0, mujoco.mjtState.mjSTATE_INTEGRATION)
+    steps = 0
+    t0 = time.perf_counter()
+    for nb, ctrl, mocap in log.blocks:
+        d.ctrl[:] = ctrl
+        d.mocap_pos[:] = mocap
+        mujoco.mj_step(model, d, nb)
+        steps += nb
+    wall = time.perf_counter() - t0
+    return steps * model.opt.timestep / wall, d.qpos.copy()
+
+
 def bare_steps_per_s(quick: bool = False) -> tuple[float, float]:
     """(steps per wall second, timestep [s]) of bare mj_step calls of the robot alone (``SCENE_XML``), driving: the
     physics step every ``bigcbf perf`` figure is also given as a ratio to (``bigcbf.cli.perf``)."""

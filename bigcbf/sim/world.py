@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Callable
 
 import mujoco
@@ -29,6 +30,24 @@ WHEELS = ("fl", "fr", "rl", "rr")
 def _yaw(quat_wxyz) -> float:
     w, x, y, z = quat_wxyz
     return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+@dataclass
+class PhysicsLog:
+    """The physics blocks of a run as stepped (:meth:`SimWorld.record_blocks`): the simulation state before the
+    first (``mj_getState`` with mjSTATE_INTEGRATION, the solver's warm start included, so that a replay is the run
+    to the bit) and, per block, its steps, wheel targets and mocap positions (the only inputs the world writes
+    between blocks)."""
+
+    state0: np.ndarray | None
+    blocks: list
+
+    def add(self, m: mujoco.MjModel, d: mujoco.MjData, nb: int) -> None:
+        if self.state0 is None:
+            spec = mujoco.mjtState.mjSTATE_INTEGRATION
+            self.state0 = np.empty(mujoco.mj_stateSize(m, spec))
+            mujoco.mj_getState(m, d, self.state0, spec)
+        self.blocks.append((int(nb), d.ctrl.copy(), d.mocap_pos.copy()))
 
 
 class SimWorld:
@@ -83,6 +102,8 @@ class SimWorld:
         self._imu_acc = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_acc")]
         self._imu_quat = m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "imu_quat")]
         self._hooks: list[Callable[["SimWorld"], None]] = []
+        #: the physics blocks as stepped, for ``bigcbf perf``'s replay (``record_blocks``); None: not recorded
+        self.block_log: PhysicsLog | None = None
         self._ctrl_for, self._ctrl = None, np.zeros(4)
         self.odometry = WheelOdometry(kinematics)
         self.reset_pose(*self.scene.robot_start)
@@ -96,6 +117,13 @@ class SimWorld:
     @property
     def dt(self) -> float:
         return float(self.model.opt.timestep)
+
+    def record_blocks(self) -> "PhysicsLog":
+        """From now on, log every physics block as it is stepped (its wheel targets, the pedestrians' mocap
+        positions, its number of steps) and the state before the first: ``sim.perf.replay_realtime_factor`` steps
+        exactly this physics again without the stack (``bigcbf perf``'s floor of the same run)."""
+        self.block_log = PhysicsLog(state0=None, blocks=[])
+        return self.block_log
 
     def add_pre_step(self, hook: Callable[["SimWorld"], None]) -> None:
         """Call ``hook(world)`` before every block of physics steps (pedestrian motion, ...; see ``step``)."""
@@ -138,6 +166,8 @@ class SimWorld:
             if nxt is not None:                        # stop the block where the next command takes effect
                 nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
             w0, g0 = d.qvel[self._wheel_dof], float(d.sensordata[self._imu_gyro + 2])     # (an index copy)
+            if self.block_log is not None:
+                self.block_log.add(m, d, nb)
             try:
                 mujoco.mj_step(m, d, nb)
             except mujoco.FatalError as exc:           # the scene asks more of the simulator than it can hold
