@@ -76,6 +76,22 @@ def kf_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, meas_var) -> tuple[np
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
 
 
+def static_update(xs: np.ndarray, Ps: np.ndarray, x_cv: np.ndarray, P_cv: np.ndarray, z: np.ndarray, R: np.ndarray,
+                  gate_chi2: float) -> tuple[np.ndarray, np.ndarray]:
+    """The tracker's constant-position filter (its static tracks' position, ``perception.tracker``): the update of
+    positions xs (K,2), covariances Ps (K,2,2) with measurements z (K,2) of covariances R (K,2,2) (Joseph form,
+    symmetrised), then its consistency check against the CV filter's updated position x_cv (K,2) and covariance
+    P_cv (K,2,2): where they disagree beyond gate_chi2 (``mahalanobis2``) it restarts from them. The numpy
+    reference of the tracker's compiled update (``tracker._measurement_update``)."""
+    K = Ps @ np.linalg.inv(Ps + R)
+    xs = xs + np.einsum("nij,nj->ni", K, z - xs)
+    IK = np.eye(2) - K
+    Ps = IK @ Ps @ IK.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
+    Ps = 0.5 * (Ps + Ps.transpose(0, 2, 1))
+    moved = mahalanobis2(xs - x_cv, Ps + P_cv) > gate_chi2
+    return np.where(moved[:, None], x_cv, xs), np.where(moved[:, None, None], P_cv, Ps)
+
+
 def mahalanobis2(y: np.ndarray, S: np.ndarray) -> np.ndarray:
     """y^T S^-1 y for innovations y (..., 2) and covariances S (..., 2, 2) (closed-form 2x2 inverse)."""
     a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]

@@ -7,6 +7,7 @@ import pytest
 from bigcbf.params.perception import PerceptionParams
 from bigcbf.perception import geometry as G
 from bigcbf.perception.synthetic import box_segments, ray_scan
+from bigcbf.perception.kalman import static_update
 
 PR = PerceptionParams()
 
@@ -382,9 +383,11 @@ def _episode_frames(name, seconds):
 
 
 @pytest.mark.parametrize("source", ["perf", "mixed_dense_traffic", "francis2023_narrow_doorway", "multi_static_clutter"])
-def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch, source):
+def test_whole_pipeline_is_the_numpy_pipeline(monkeypatch, source):
     """Perception.update with every compiled piece against the same pipeline run on the reference copies: on the
-    perf bench's scans and on the simulated LiDAR of two episodes (walkers, walls, doors)."""
+    perf bench's scans and on the simulated LiDAR of three episodes (walkers, walls, doors). Bit for bit until the
+    tracker's measurement update was compiled (issue 26: ``tracker._measurement_update`` sums its small matrix
+    products in its own order, not BLAS's); since, the same tracks and classes, the estimates equal to rounding."""
     from bigcbf.perception import perf, pipeline
     from bigcbf.perception.tracker import Tracker
     rng = np.random.default_rng(3)
@@ -415,8 +418,10 @@ def test_whole_pipeline_is_the_numpy_pipeline_bit_for_bit(monkeypatch, source):
     n_tracks = 0
     for a, b in zip(got, want):
         n_tracks += int((a.ids >= 0).sum())
-        for field in ("p", "v", "cov", "r", "static", "ids"):
+        for field in ("static", "ids"):
             assert np.array_equal(getattr(a, field), getattr(b, field)), field
+        for field in ("p", "v", "cov", "r"):     # (largest difference measured: 9e-15)
+            np.testing.assert_allclose(getattr(a, field), getattr(b, field), rtol=1e-9, atol=1e-12, err_msg=field)
     assert n_tracks > (200 if source == "perf" else 20)     # tracks were reported: the tracker is compared too
 
 
@@ -473,7 +478,8 @@ def ref_step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndar
     if len(rows):
         x, P = _kf_update(self.x[rows], self.P[rows], z[cols], R[cols])
         self.x[rows], self.P[rows] = x, P
-        self._update_static_filter(rows, z[cols], R[cols])
+        self.xs[rows], self.Ps[rows] = static_update(self.xs[rows], self.Ps[rows], x[:, :2], P[:, :2, :2], z[cols],
+                                                     R[cols], pr.gate_chi2)   # Tracker._update_static_filter of d27bf46
         a = pr.radius_smoothing
         self.r[rows] = (1 - a) * self.r[rows] + a * radii[cols]
         b = pr.shape_smoothing

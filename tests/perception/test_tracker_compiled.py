@@ -1,0 +1,47 @@
+"""Issue 26: the tracker's compiled measurement update (tracker._measurement_update) against its numpy references,
+kalman.kf_update (the CV filter, Joseph form), kalman.static_update (the constant-position filter and its
+consistency check) and classify.speed_sigma, on random filters: equal to rounding."""
+import numpy as np
+
+from bigcbf.perception.classify import speed_sigma
+from bigcbf.perception.kalman import kf_update, static_update
+from bigcbf.perception.tracker import _measurement_update
+
+
+def _spd(rng, n, d, scale):
+    a = rng.normal(size=(n, d, d)) * scale
+    return a @ a.transpose(0, 2, 1) + np.eye(d) * scale ** 2 * 0.1
+
+
+def test_compiled_update_matches_the_numpy_references():
+    rng = np.random.default_rng(7)
+    n = 9
+    x = rng.normal(size=(n, 4))
+    x[3, 2:] = 0.0                                          # a track at rest: the speed's std is lambda_max's
+    P = _spd(rng, n, 4, 0.3)
+    xs = x[:, :2] + rng.normal(size=(n, 2)) * 0.05
+    xs[5] += 3.0                                            # far from the CV filter: the check restarts it there
+    Ps = _spd(rng, n, 2, 0.1)
+    rows = np.array([0, 3, 5, 8], np.int64)
+    cols = np.array([2, 0, 1, 3], np.int64)
+    z = x[rows[np.argsort(cols)], :2] + rng.normal(size=(4, 2)) * 0.1
+    R = _spd(rng, 4, 2, 0.1)
+    gate = 9.21
+    # the references
+    xr, Pr = kf_update(x[rows], P[rows], z[cols], R[cols])
+    xsr, Psr = static_update(xs[rows], Ps[rows], xr[:, :2], Pr[:, :2, :2], z[cols], R[cols], gate)
+    sig_r = speed_sigma(xr[:, 2:], Pr[:, 2:, 2:])
+    sv_r = np.sqrt(np.linalg.eigvalsh(Pr[:, 2:, 2:])[:, -1])
+    # compiled, in place
+    xc, Pc, xsc, Psc, sv = x.copy(), P.copy(), xs.copy(), Ps.copy(), np.zeros(n)
+    sig = np.empty(len(rows))
+    _measurement_update(rows, cols, xc, Pc, xsc, Psc, z, R, gate, sig, sv)
+    np.testing.assert_allclose(xc[rows], xr, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Pc[rows], Pr, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(xsc[rows], xsr, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(Psc[rows], Psr, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(sig, sig_r, rtol=1e-10)
+    np.testing.assert_allclose(sv[rows], sv_r, rtol=1e-10)
+    assert np.array_equal(xsc[5], xc[5, :2])                # restarted from the CV filter
+    others = np.setdiff1d(np.arange(n), rows)               # tracks without a measurement are left alone
+    assert np.array_equal(xc[others], x[others]) and np.array_equal(Pc[others], P[others])
