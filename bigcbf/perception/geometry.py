@@ -1,9 +1,13 @@
 """Scan geometry: beams to points in odom, scan-order clustering, circle and rectangle fits, wall points.
 
 Numpy, and compiled kernels (``bigcbf.control.jit.kernel``) for the per-point loops of clustering, the compactness
-test and the wall points; no simulator import (this runs on the robot). The kernels keep the numpy arithmetic's
+test and the wall points; no simulator import (this runs on the robot). Those kernels keep the numpy arithmetic's
 order (sums as numpy's pairwise ``add.reduce``/``reduceat``, cumulative sums in order, transcendental functions
-left to numpy): the results are the bits of the numpy code they replaced (tests/perception/test_geometry_compiled.py).
+left to numpy): the results are the bits of the numpy code they replaced. The per-cluster fits that
+:func:`measure_clusters` runs in its loop (the rectangle fit and its covariance, the fixed-radius refit; issue 26)
+are compiled with their own sums, cos and sin: equal to their numpy references (:func:`fit_rectangle`,
+:func:`rectangle_covariance`, :func:`fit_circle_fixed_radius`, which :func:`measure_compact` runs) to rounding
+(tests/perception/test_geometry_compiled.py).
 """
 from __future__ import annotations
 
@@ -269,6 +273,118 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):
     return center, long_ / np.sqrt(2), rms
 
 
+#: the fine search's offsets as above, for the compiled fit
+_FINE_C = np.ascontiguousarray(_FINE)
+
+
+@kernel
+def _rect_search(P, lo, n, e1x, e1y, e2x, e2y, best):
+    """For orientations k (unit axes (e1x[k], e1y[k]), (e2x[k], e2y[k])): the sum over the points P[lo:lo+n] of the
+    squared distance to the nearest edge of their bounding rectangle (``fit_rectangle``'s criterion); returns the
+    first k with the least sum, and fills best = (amin, amax, bmin, bmax, sum) of it."""
+    kbest = -1
+    for k in range(e1x.shape[0]):
+        amin = bmin = np.inf
+        amax = bmax = -np.inf
+        for i in range(lo, lo + n):
+            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
+            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
+            amin, amax, bmin, bmax = min(amin, a), max(amax, a), min(bmin, b), max(bmax, b)
+        ss = 0.0
+        for i in range(lo, lo + n):
+            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
+            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
+            d = min(min(a - amin, amax - a), min(b - bmin, bmax - b))
+            ss += d * d
+        if kbest < 0 or ss < best[4]:
+            kbest = k
+            best[0], best[1], best[2], best[3], best[4] = amin, amax, bmin, bmax, ss
+    return kbest
+
+
+@kernel
+def _rect_fit(P, lo, n, sx, sy, coarse, fine, out):
+    """:func:`fit_rectangle` (its numpy reference) of the points P[lo:lo+n], seen from the sensor (sx, sy), compiled:
+    out = (centre x, y, radius, rms, e1 x, y, e2 x, y, la, lb). The same search (1-degree steps over 0..89 degrees,
+    then +-1 degree in 0.05-degree steps), sums in point order, cos and sin of the compiled code: equal to the
+    reference to rounding (tests/perception/test_geometry_compiled.py)."""
+    best = np.empty(5)
+    e1x, e1y = np.cos(coarse), np.sin(coarse)
+    k = _rect_search(P, lo, n, e1x, e1y, -e1y, e1x, best)
+    ang = coarse[k] + fine
+    f1x, f1y = np.cos(ang), np.sin(ang)
+    j = _rect_search(P, lo, n, f1x, f1y, -f1y, f1x, best)
+    ux, uy, vx, vy = f1x[j], f1y[j], -f1y[j], f1x[j]
+    amin, amax, bmin, bmax = best[0], best[1], best[2], best[3]
+    la, lb = amax - amin, bmax - bmin
+    ma, mb = (amax + amin) / 2, (bmax + bmin) / 2
+    cx, cy = ma * ux + mb * vx, ma * uy + mb * vy
+    short, long_ = min(la, lb), max(la, lb)
+    nx, ny = (vx, vy) if la >= lb else (ux, uy)
+    if nx * (cx - sx) + ny * (cy - sy) < 0:
+        nx, ny = -nx, -ny
+    shift = (long_ - short) / 2
+    out[0], out[1] = cx + shift * nx, cy + shift * ny
+    out[2] = long_ / math.sqrt(2.0)
+    out[3] = math.sqrt(best[4] / n)
+    out[4], out[5], out[6], out[7], out[8], out[9] = ux, uy, vx, vy, la, lb
+
+
+@kernel
+def _rect_cov(P, lo, n, sx, sy, e1x, e1y, e2x, e2y, la, lb, angle_increment, range_sigma, range_frac, sigma_max,
+              C):
+    """:func:`rectangle_covariance` (its numpy reference) compiled, into C (2, 2)."""
+    r = 0.0
+    for i in range(lo, lo + n):
+        r += math.sqrt((P[i, 0] - sx) ** 2 + (P[i, 1] - sy) ** 2)
+    r /= n
+    sr = range_sigma + range_frac * r
+    end = sr * sr + (r * angle_increment) ** 2 / 12.0
+    v1 = v2 = 0.5 * end
+    if lb < la:
+        v2 += (la - lb) ** 2 / 12.0
+    else:
+        v1 += (lb - la) ** 2 / 12.0
+    c11 = v1 * e1x * e1x + v2 * e2x * e2x
+    c12 = v1 * e1x * e1y + v2 * e2x * e2y
+    c22 = v1 * e1y * e1y + v2 * e2y * e2y
+    lam = 0.5 * (c11 + c22) + math.sqrt(0.25 * (c11 - c22) ** 2 + c12 * c12)
+    if lam > sigma_max ** 2:
+        k = sigma_max ** 2 / lam
+        c11, c12, c22 = c11 * k, c12 * k, c22 * k
+    C[0, 0], C[0, 1], C[1, 0], C[1, 1] = c11, c12, c12, c22
+
+
+@kernel
+def _fixed_radius_fit(P, lo, n, radius, cx, cy, iterations, out):
+    """:func:`fit_circle_fixed_radius` (its numpy reference) of P[lo:lo+n] from the centre (cx, cy), compiled: out =
+    (centre x, y, rms)."""
+    for _ in range(iterations):
+        a = b = d = gx = gy = 0.0
+        for i in range(lo, lo + n):
+            ux, uy = cx - P[i, 0], cy - P[i, 1]
+            dist = max(math.sqrt(ux * ux + uy * uy), 1e-9)
+            res = dist - radius
+            jx, jy = ux / dist, uy / dist
+            a += jx * jx
+            b += jx * jy
+            d += jy * jy
+            gx += jx * res
+            gy += jy * res
+        det = a * d - b * b
+        if det <= 1e-12:
+            break
+        sx, sy = -(d * gx - b * gy) / det, -(a * gy - b * gx) / det
+        cx, cy = cx + sx, cy + sy
+        if sx * sx + sy * sy < 1e-14:
+            break
+    ss = 0.0
+    for i in range(lo, lo + n):
+        res = math.sqrt((P[i, 0] - cx) ** 2 + (P[i, 1] - cy) ** 2) - radius
+        ss += res * res
+    out[0], out[1], out[2] = cx, cy, math.sqrt(ss / n)
+
+
 def point_variances(points: np.ndarray, normals: np.ndarray, sensor: np.ndarray, angle_increment: float,
                     params: PerceptionParams) -> np.ndarray:
     """Variance [m^2] of each LiDAR point's offset along the model's surface normal there (unit ``normals`` (n,2)):
@@ -424,8 +540,9 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     """:func:`measure_compact` and :func:`concavity` (k = 2) of many compact clusters at once: the algebraic circle
     fits, residuals, arc spans, covariances and dents of all clusters in a few array operations over their
     concatenated points (np.*.reduceat), the fixed-radius refits and rectangle fits in a loop over the clusters
-    that need them. Same results as calling the two per cluster (to rounding: sums run in another order); the
-    per-cluster functions stay the reference (``tests/perception/test_geometry.py``).
+    that need them, compiled (``_fixed_radius_fit``, ``_rect_fit``, ``_rect_cov``). Same results as calling the two
+    per cluster (to rounding: sums run in another order); the per-cluster functions stay the reference
+    (``tests/perception/test_geometry.py``).
 
     ``clusters``: Cluster objects of at least 3 points. Returns (measurements, dents [m]).
 
@@ -445,11 +562,12 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     sigma, r, rms, tol, fitted = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_)
     _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m), float(pr.range_sigma_frac),
                float(pr.radius_min_m), float(pr.radius_max_m), near, ray, sigma, c, r, rms, fitted, tol)
+    fit3, rect, cov_r = np.empty(3), np.empty(10), np.empty((2, 2))
     for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
         rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
-        pts = P[starts[j]: starts[j] + n[j]]
-        cj, rmsj = fit_circle_fixed_radius(pts, rj, near[j] + rj * ray[j])
-        c[j], r[j], rms[j] = cj, rj, rmsj
+        c0 = near[j] + rj * ray[j]
+        _fixed_radius_fit(P, int(starts[j]), int(n[j]), rj, float(c0[0]), float(c0[1]), 10, fit3)
+        c[j, 0], c[j, 1], r[j], rms[j] = fit3[0], fit3[1], rj, fit3[2]
     # arc span seen from the centre, as measure_compact (numpy's arctan2, arccos, arcsin of compiled arguments)
     ay, ax, A, dents = np.empty(len(P)), np.empty(len(P)), np.empty((6, m)), np.zeros(m)
     behind, cos_arg, sin_arg = np.empty(m, np.bool_), np.empty(m), np.empty(m)
@@ -461,25 +579,27 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
               float(pr.fit_span_ratio), span, need)
     a11, a12, a22, a13, a23, a33 = A
     out = []
+    sx, sy = float(sensor[0]), float(sensor[1])
     for j in range(m):
-        pts = P[starts[j]: starts[j] + n[j]]
+        lo, nj = int(starts[j]), int(n[j])
+        fitted_rect = False
         if tol[j] > 0 and rms[j] <= tol[j]:
-            rect, rms_rect = None, np.inf
+            rms_rect = np.inf
         else:
-            rect = fit_rectangle(pts, sensor, full=True)
-            rms_rect = rect[2]
+            _rect_fit(P, lo, nj, sx, sy, _COARSE, _FINE_C, rect)
+            fitted_rect, rms_rect = True, float(rect[3])
         if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
             cov = _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
                                         c[j], sensor, pr)
             out.append(Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
                                    bool(rms[j] <= rms_rect)))
             continue
-        if rect is None:
-            rect = fit_rectangle(pts, sensor, full=True)
-        rc, rrad, rms_rect, axes, lengths = rect
-        cov = rectangle_covariance(pts, axes, lengths, sensor, sp.angle_increment, pr)
-        out.append(Measurement(rc, float(np.clip(rrad, pr.radius_min_m, pr.radius_max_m)), False, cov,
-                               float(rms_rect), float(sigma[j])))
+        if not fitted_rect:
+            _rect_fit(P, lo, nj, sx, sy, _COARSE, _FINE_C, rect)
+        _rect_cov(P, lo, nj, sx, sy, rect[4], rect[5], rect[6], rect[7], rect[8], rect[9], float(sp.angle_increment),
+                  float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_max_m), cov_r)
+        out.append(Measurement(rect[:2].copy(), float(np.clip(rect[2], pr.radius_min_m, pr.radius_max_m)), False,
+                               cov_r.copy(), float(rect[3]), float(sigma[j])))
     return out, dents
 
 

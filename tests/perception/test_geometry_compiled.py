@@ -303,15 +303,50 @@ def test_compiled_geometry_is_the_numpy_code_bit_for_bit(params):
         (ms, dents), (ms0, dents0) = G.measure_clusters(sp, compact, params), ref_measure_clusters(sp, compact, params)
         assert np.array_equal(dents, dents0) and len(ms) == len(ms0)
         for a, b in zip(ms, ms0):
-            assert np.array_equal(a.center, b.center) and np.array_equal(a.cov, b.cov)
-            assert (a.radius, a.arc_fit, a.rms, a.rms_expected, a.round) == (b.radius, b.arc_fit, b.rms,
-                                                                              b.rms_expected, b.round)
+            # the rectangle fits, their covariances and the fixed-radius refits are compiled with their own sums
+            # (issue 26): equal to rounding; the rest of the measurement bit for bit
+            np.testing.assert_allclose(a.center, b.center, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(a.cov, b.cov, rtol=1e-9, atol=1e-15)
+            np.testing.assert_allclose((a.radius, a.rms), (b.radius, b.rms), rtol=1e-9, atol=1e-12)
+            assert (a.arc_fit, a.rms_expected, a.round) == (b.arc_fit, b.rms_expected, b.round)
         sets = [sp.xy[c.idx] for c in want] + [np.zeros((0, 2))]
         robot = np.array(pose[:2])
         for spacing in (0.2, 0.05):
             a = G.wall_candidates_many(sets, robot, spacing)
             b = ref_wall_candidates_many(sets, robot, spacing)
             assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_compiled_rectangle_and_refit_match_their_numpy_references():
+    """geometry._rect_fit, _rect_cov and _fixed_radius_fit (what measure_clusters runs) against fit_rectangle,
+    rectangle_covariance and fit_circle_fixed_radius on noisy L-shapes, faces and arcs at random poses."""
+    rng = np.random.default_rng(11)
+    out, C, fit3 = np.empty(10), np.empty((2, 2)), np.empty(3)
+    for trial in range(200):
+        th, w, h = rng.uniform(0, np.pi), rng.uniform(0.1, 0.8), rng.uniform(0.1, 0.8)
+        c = rng.uniform(-4, 4, 2)
+        s = np.linspace(0, 1, rng.integers(4, 30))
+        e1, e2 = np.array([np.cos(th), np.sin(th)]), np.array([-np.sin(th), np.cos(th)])
+        pts = c + np.r_[np.outer(s * w, e1), np.outer(s * h, e2)[1:] if trial % 3 else np.zeros((0, 2))]
+        pts = pts + rng.normal(0, 0.01, pts.shape)
+        sensor = c - 3.0 * (e1 + e2) / np.sqrt(2)
+        P = np.ascontiguousarray(np.r_[rng.normal(size=(3, 2)), pts])         # at an offset in a longer array
+        G._rect_fit(P, 3, len(pts), float(sensor[0]), float(sensor[1]), G._COARSE, G._FINE_C, out)
+        center, radius, rms, axes, (la, lb) = G.fit_rectangle(pts, sensor, full=True)
+        np.testing.assert_allclose(out[:2], center, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(out[2:4], (radius, rms), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(out[4:8], axes.ravel(), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(out[8:], (la, lb), rtol=1e-9, atol=1e-12)
+        G._rect_cov(P, 3, len(pts), float(sensor[0]), float(sensor[1]), *out[4:10], np.deg2rad(0.5), PR.range_sigma_m,
+                    PR.range_sigma_frac, PR.radius_max_m, C)
+        np.testing.assert_allclose(C, G.rectangle_covariance(pts, axes, (la, lb), sensor, np.deg2rad(0.5), PR),
+                                   rtol=1e-9, atol=1e-15)
+        r0 = rng.uniform(0.1, 0.4)
+        arc = c + r0 * np.c_[np.cos(s * 2), np.sin(s * 2)] + rng.normal(0, 0.01, (len(s), 2))
+        start = c + rng.normal(0, 0.05, 2)
+        G._fixed_radius_fit(np.ascontiguousarray(arc), 0, len(arc), r0, float(start[0]), float(start[1]), 10, fit3)
+        cf, rmsf = G.fit_circle_fixed_radius(arc, r0, start)
+        np.testing.assert_allclose(fit3, (*cf, rmsf), rtol=1e-9, atol=1e-12)
 
 
 def test_degenerate_scans():
