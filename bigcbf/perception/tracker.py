@@ -158,6 +158,45 @@ def _sym2_lmax(a, b, c):
 
 
 @kernel
+def _reported(idx, static, x, P, xs, Ps, P_hit, sv_hit, last_hit, t, v_max, a_max, p, cov):
+    """:meth:`Tracker.reported` compiled, track by track: the static filter's position and covariance for a static
+    track, the CV filter's for a dynamic one; a coasting track's covariance (tau = t - last hit > 1e-9) capped at
+    sqrt(lambda_max(P_hit)) + :func:`coast_bound` (:func:`cap_covariance`)."""
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        st = static[i]
+        for a in range(2):
+            p[k, a] = xs[i, a] if st else x[i, a]
+            for b in range(2):
+                cov[k, a, b] = Ps[i, a, b] if st else P[i, a, b]
+        tau = t - last_hit[i]
+        if tau > 1e-9:
+            lam0 = _sym2_lmax(P_hit[i, 0, 0], 0.5 * (P_hit[i, 0, 1] + P_hit[i, 1, 0]), P_hit[i, 1, 1])
+            bound = 0.0
+            if not st:
+                speed = math.sqrt(x[i, 2] * x[i, 2] + x[i, 3] * x[i, 3])
+                bound = min((v_max + speed) * tau, 0.5 * a_max * tau * tau + sv_hit[i] * tau)
+            sigma_max = math.sqrt(max(lam0, 0.0)) + bound
+            lam = _sym2_lmax(cov[k, 0, 0], 0.5 * (cov[k, 0, 1] + cov[k, 1, 0]), cov[k, 1, 1])
+            cap = sigma_max * sigma_max
+            if lam > cap:
+                f = cap / max(lam, 1e-300)
+                for a in range(2):
+                    for b in range(2):
+                        cov[k, a, b] *= f
+
+
+@kernel
+def _surface_tolerance(P, conf, merge_tol, out):
+    """:meth:`Tracker.surface_owner`'s tolerance of each confirmed track conf[k]: merge_tol plus twice the largest
+    standard deviation of its position (closed-form eigenvalue of the 2x2 block)."""
+    for k in range(conf.shape[0]):
+        i = conf[k]
+        lam = _sym2_lmax(P[i, 0, 0], 0.5 * (P[i, 0, 1] + P[i, 1, 0]), P[i, 1, 1])
+        out[k] = merge_tol + 2.0 * math.sqrt(max(lam, 0.0))
+
+
+@kernel
 def _measurement_update(rows, cols, x, P, xs, Ps, z, R, gate_chi2, sigma, sv_hit):
     """The measurement updates of :meth:`Tracker.step`, track rows[k] with measurement cols[k], in place:
 
@@ -328,8 +367,8 @@ class Tracker:
         if len(conf) == 0 or len(points) == 0:
             return out
         c, r = np.ascontiguousarray(self.x[conf, :2]), np.ascontiguousarray(self.r[conf])
-        lam = np.linalg.eigvalsh(self.P[conf, :2, :2])[:, -1]
-        tol = self.params.merge_tol_m + 2.0 * np.sqrt(np.maximum(lam, 0.0))
+        tol = np.empty(len(conf))
+        _surface_tolerance(self.P, conf, float(self.params.merge_tol_m), tol)
         _nearest_circle(np.ascontiguousarray(points, dtype=float), c, r, tol, conf.astype(np.int64), out)
         return out
 
@@ -417,17 +456,14 @@ class Tracker:
     def reported(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position (K, 2) and covariance (K, 2, 2) of tracks ``idx`` as reported: the constant-position filter's
         for static tracks, the CV filter's for dynamic ones; while coasting (no measurement at the current time),
-        the covariance is capped at the standard deviation of the last update plus :func:`coast_bound`."""
-        st = self.static[idx]
-        p = np.where(st[:, None], self.xs[idx], self.x[idx, :2])
-        cov = np.where(st[:, None, None], self.Ps[idx], self.P[idx, :2, :2])
-        tau = (self.t if self.t is not None else 0.0) - self.last_hit[idx]
-        coasting = tau > 1e-9
-        if coasting.any():
-            speed = np.linalg.norm(self.x[idx, 2:], axis=1)
-            lam0 = np.linalg.eigvalsh(self.P_hit[idx])[:, -1]
-            sigma_max = np.sqrt(np.maximum(lam0, 0.0)) + coast_bound(tau, st, speed, self.sv_hit[idx], self.params)
-            cov = np.where(coasting[:, None, None], cap_covariance(cov, sigma_max), cov)
+        the covariance is capped at the standard deviation of the last update plus :func:`coast_bound`
+        (:func:`cap_covariance`; compiled: ``_reported``)."""
+        idx = np.ascontiguousarray(idx, dtype=np.int64)
+        p, cov = np.empty((len(idx), 2)), np.empty((len(idx), 2, 2))
+        pr = self.params
+        _reported(idx, self.static, self.x, self.P, self.xs, self.Ps, self.P_hit, self.sv_hit, self.last_hit,
+                  self.t if self.t is not None else 0.0, float(pr.walk_speed_max_mps), float(pr.walk_accel_max_mps2),
+                  p, cov)
         return p, cov
 
     def surface_distance(self, robot_xy: np.ndarray) -> np.ndarray:

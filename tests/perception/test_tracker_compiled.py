@@ -45,3 +45,32 @@ def test_compiled_update_matches_the_numpy_references():
     assert np.array_equal(xsc[5], xc[5, :2])                # restarted from the CV filter
     others = np.setdiff1d(np.arange(n), rows)               # tracks without a measurement are left alone
     assert np.array_equal(xc[others], x[others]) and np.array_equal(Pc[others], P[others])
+
+
+def test_compiled_report_matches_the_numpy_reference():
+    """Tracker.reported (compiled: tracker._reported) against its numpy form (as of 417ecbb): static tracks report
+    the constant-position filter, dynamic ones the CV filter; coasting covariances capped at the last update's
+    largest std plus coast_bound (cap_covariance)."""
+    from bigcbf.perception.tracker import Tracker, cap_covariance, coast_bound
+    rng = np.random.default_rng(5)
+    T = Tracker()
+    n = 12
+    T.x, T.P = rng.normal(size=(n, 4)), _spd(rng, n, 4, 0.4)
+    T.xs, T.Ps, T.P_hit = rng.normal(size=(n, 2)), _spd(rng, n, 2, 0.2), _spd(rng, n, 2, 0.05)
+    T.static = rng.random(n) < 0.4
+    T.sv_hit = rng.uniform(0.01, 0.3, n)
+    T.t = 3.0
+    T.last_hit = np.where(rng.random(n) < 0.5, 3.0, 3.0 - rng.uniform(0.05, 1.5, n))
+    idx = np.array([0, 2, 3, 5, 7, 8, 11])
+    p, cov = T.reported(idx)
+    st = T.static[idx]
+    p0 = np.where(st[:, None], T.xs[idx], T.x[idx, :2])
+    c0 = np.where(st[:, None, None], T.Ps[idx], T.P[idx, :2, :2])
+    tau = T.t - T.last_hit[idx]
+    lam0 = np.linalg.eigvalsh(T.P_hit[idx])[:, -1]
+    sigma_max = np.sqrt(np.maximum(lam0, 0.0)) + coast_bound(tau, st, np.linalg.norm(T.x[idx, 2:], axis=1),
+                                                             T.sv_hit[idx], T.params)
+    c0 = np.where((tau > 1e-9)[:, None, None], cap_covariance(c0, sigma_max), c0)
+    assert np.array_equal(p, p0)
+    np.testing.assert_allclose(cov, c0, rtol=1e-12, atol=1e-15)
+    assert not np.allclose(cov, np.where(st[:, None, None], T.Ps[idx], T.P[idx, :2, :2]))     # some were capped
