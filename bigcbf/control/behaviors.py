@@ -121,16 +121,42 @@ def goal_basis(p, goal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def obstacle_groups(obs_p, obs_r, params: StackParams) -> np.ndarray:
     """Group labels (M,): obstacles i, j are connected when the gap between them, ||p_i - p_j|| - r_i - r_j, is
     smaller than 2 (r_R + d0) + 0.1 m (the robot's footprint with its base clearance cannot pass between them);
-    groups are the connected components (scipy.sparse.csgraph)."""
-    from scipy.sparse.csgraph import connected_components
-
+    groups are the connected components, labelled in the order of their lowest member (as
+    ``scipy.sparse.csgraph.connected_components`` labels them; compiled: :func:`_components`)."""
     p = np.asarray(obs_p, float).reshape(-1, 2)
     if len(p) <= 1:
         return np.zeros(len(p), int)
     r = np.asarray(obs_r, float)
     unc = params.uncertainty
     gap = np.hypot(*(p[:, None, :] - p[None, :, :]).transpose(2, 0, 1)) - r[:, None] - r[None, :]
-    return connected_components(gap < 2 * (unc.r_robot_m + unc.d0_m) + 0.1, directed=False)[1]
+    labels = np.empty(len(p), np.int32)
+    _components(gap < 2 * (unc.r_robot_m + unc.d0_m) + 0.1, labels)
+    return labels
+
+
+@kernel
+def _components(adj, labels):
+    """Connected components of the symmetric adjacency ``adj`` (M, M) into ``labels``: nodes in index order, each
+    unlabelled one starts the next label and a depth-first search gives it to its component."""
+    M = adj.shape[0]
+    labels[:] = -1
+    stack = np.empty(M, np.int64)
+    nxt = 0
+    for v in range(M):
+        if labels[v] >= 0:
+            continue
+        labels[v] = nxt
+        top = 0
+        stack[0] = v
+        while top >= 0:
+            u = stack[top]
+            top -= 1
+            for w in range(M):
+                if adj[u, w] and labels[w] < 0:
+                    labels[w] = nxt
+                    top += 1
+                    stack[top] = w
+        nxt += 1
 
 
 def alone_in_group(groups) -> np.ndarray:
