@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from ..types import Obstacles, RobotState
+from .jit import kernel
 
 MAX_POSITION_M = 1e4
 MAX_SPEED_MPS = 50.0
@@ -116,13 +117,32 @@ def perception_fault(state: RobotState, obstacles: Obstacles, goal=None) -> str 
 
 
 def _plainly_usable(p, v, cov, r) -> bool:
-    """Every number finite and within the bounds, checked in a few array operations (the usual case)."""
-    if (np.isfinite(p).all() and np.isfinite(v).all() and np.isfinite(cov).all() and np.isfinite(r).all()
-            and np.abs(p).max() <= MAX_POSITION_M and np.abs(v).max() <= MAX_SPEED_MPS / math.sqrt(2)
-            and r.min() >= 0 and r.max() <= MAX_RADIUS_M):
-        c01, c10 = cov[:, 0, 1], cov[:, 1, 0]
-        a, c = cov[:, 0, 0], cov[:, 1, 1]
-        if (np.array_equal(c01, c10) and (a >= 0).all() and (c >= 0).all() and (a * c >= c01 * c01).all()
-                and (a + c).max() <= MAX_COVARIANCE_M2):
-            return True
-    return False
+    """Every number finite and within the bounds, in one compiled pass (the usual case; :func:`_usable`)."""
+    return bool(_usable(np.asarray(p, float), np.asarray(v, float), np.asarray(cov, float), np.asarray(r, float),
+                        MAX_POSITION_M, MAX_SPEED_MPS / math.sqrt(2), MAX_RADIUS_M, MAX_COVARIANCE_M2))
+
+
+@kernel
+def _usable(p, v, cov, r, max_pos, max_v, max_r, max_cov):
+    """M >= 1 obstacles: every position, velocity, covariance and radius finite; |p| <= max_pos and |v| <= max_v per
+    component; 0 <= r <= max_r; each covariance symmetric to the bit, with a, c >= 0, a c >= b^2 and a + c <= max_cov
+    (a, b, c its entries). The comparisons of the numpy formulation it replaced, element by element."""
+    M = p.shape[0]
+    for i in range(M):
+        for k in range(2):
+            if not (math.isfinite(p[i, k]) and math.isfinite(v[i, k])):
+                return False
+            for j in range(2):
+                if not math.isfinite(cov[i, k, j]):
+                    return False
+        if not math.isfinite(r[i]):
+            return False
+    for i in range(M):
+        if abs(p[i, 0]) > max_pos or abs(p[i, 1]) > max_pos or abs(v[i, 0]) > max_v or abs(v[i, 1]) > max_v:
+            return False
+        if r[i] < 0 or r[i] > max_r:
+            return False
+        a, b, b2, c = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 0], cov[i, 1, 1]
+        if b != b2 or a < 0 or c < 0 or not a * c >= b * b or a + c > max_cov:
+            return False
+    return True
