@@ -50,17 +50,32 @@ def scan_to_points(scan: LaserScan, pose: tuple[float, float, float], params: Pe
     (x, y, theta) at the scan's stamp: p_odom = R(theta) (R(yaw_l) r [cos a, sin a] + t_l) + (x, y).
     The scan is taken as instantaneous (no per-beam motion correction).
     """
-    r = np.asarray(scan.ranges, dtype=float)
+    r = np.ascontiguousarray(scan.ranges, dtype=float)
     n = len(r)
-    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
-    beam = np.flatnonzero(ok)
-    rv = r[beam]
     x, y, th = (float(v) for v in pose)
-    a = scan.angle_min + scan.angle_increment * beam + params.laser_yaw_rad + th
-    t_l = rot(th) @ np.array([params.laser_x_m, params.laser_y_m])
-    sensor = np.array([x, y]) + t_l
-    xy = np.stack([sensor[0] + rv * np.cos(a), sensor[1] + rv * np.sin(a)], axis=1)
-    return ScanPoints(xy, rv, beam, sensor, float(scan.angle_increment), n)
+    c, s = math.cos(th), math.sin(th)
+    sensor = np.array([x + c * params.laser_x_m - s * params.laser_y_m, y + s * params.laser_x_m + c * params.laser_y_m])
+    beam, xy = np.empty(n, np.int64), np.empty((n, 2))
+    k = _scan_points(r, float(scan.range_min), float(scan.range_max), float(scan.angle_min),
+                     float(scan.angle_increment), float(params.laser_yaw_rad), th, float(sensor[0]),
+                     float(sensor[1]), beam, xy)
+    return ScanPoints(xy[:k], r[beam[:k]], beam[:k], sensor, float(scan.angle_increment), n)
+
+
+@kernel
+def _scan_points(r, range_min, range_max, angle_min, angle_increment, yaw_l, th, sx, sy, beam, xy):
+    """:func:`scan_to_points`' valid beams (finite, within [range_min, range_max]) into beam[:k] and their points
+    sensor + r (cos a, sin a), a = angle_min + i angle_increment + yaw_l + theta, into xy[:k]; returns k."""
+    k = 0
+    for i in range(r.shape[0]):
+        ri = r[i]
+        if math.isfinite(ri) and ri >= range_min and ri <= range_max:
+            a = angle_min + angle_increment * i + yaw_l + th
+            beam[k] = i
+            xy[k, 0] = sx + ri * math.cos(a)
+            xy[k, 1] = sy + ri * math.sin(a)
+            k += 1
+    return k
 
 
 @dataclass(frozen=True)

@@ -349,6 +349,39 @@ def test_compiled_rectangle_and_refit_match_their_numpy_references():
         np.testing.assert_allclose(fit3, (*cf, rmsf), rtol=1e-9, atol=1e-12)
 
 
+def ref_scan_to_points(scan, pose, params):
+    """geometry.scan_to_points as of d3b5ed9 (numpy)."""
+    r = np.asarray(scan.ranges, dtype=float)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+    beam = np.flatnonzero(ok)
+    rv = r[beam]
+    x, y, th = (float(v) for v in pose)
+    a = scan.angle_min + scan.angle_increment * beam + params.laser_yaw_rad + th
+    t_l = G.rot(th) @ np.array([params.laser_x_m, params.laser_y_m])
+    sensor = np.array([x, y]) + t_l
+    return np.stack([sensor[0] + rv * np.cos(a), sensor[1] + rv * np.sin(a)], axis=1), rv, beam, sensor
+
+
+def test_compiled_scan_points_match_the_numpy_formulation():
+    """scan_to_points (compiled: geometry._scan_points) on the test scans (dropouts, infinities, out of range)
+    with a mounted laser: the same beams and ranges, the points and the sensor to rounding."""
+    mount = PerceptionParams(laser_x_m=0.09, laser_y_m=-0.02, laser_yaw_rad=0.3)
+    n = 0
+    for scan, pose in _scans():
+        r = np.array(scan.ranges, float)
+        r[::17] = scan.range_max * 2
+        r[::29] = -1.0
+        scan = scan.__class__(scan.stamp, scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max, r)
+        for params in (PR, mount):
+            sp = G.scan_to_points(scan, pose, params)
+            xy, rv, beam, sensor = ref_scan_to_points(scan, pose, params)
+            assert np.array_equal(sp.beam, beam) and np.array_equal(sp.ranges, rv) and sp.n_beams == len(r)
+            np.testing.assert_allclose(sp.xy, xy, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(sp.sensor, sensor, rtol=0, atol=1e-15)
+            n += len(beam)
+    assert n > 1000
+
+
 def test_degenerate_scans():
     sp = G.scan_to_points(ray_scan((0.0, 0.0, 0.0)), (0.0, 0.0, 0.0), PR)        # nothing in range
     assert G.cluster_points(sp, PR) == [] and len(G.compact_mask(sp, [], PR)) == 0
