@@ -33,7 +33,7 @@ def cv_process_noise(dt: float, q: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
-def _cv_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+def cv_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """(F, Q) for one (dt, q), built once: scans come at a fixed rate, so a tracker meets a few dt only (read-only
     arrays: the cache hands out the same objects; F.T stays the transposed view it always was, so the matrix
     products see the same memory layout and give the same bits)."""
@@ -46,7 +46,7 @@ def _cv_model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
 
 def kf_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Prediction over dt: x' = F x (eq:obs_prop (2) for the mean), P' = F P F^T + Q. x (N,4), P (N,4,4)."""
-    F, Q = _cv_model(float(dt), float(q))
+    F, Q = cv_model(float(dt), float(q))
     return x @ F.T, F @ P @ F.T + Q
 
 

@@ -48,7 +48,7 @@ from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import Obstacles
 from .classify import _hysteresis
-from .kalman import kf_predict
+from .kalman import cv_model
 
 _INFEASIBLE = 1e9
 
@@ -155,6 +155,33 @@ def _apply_hits(rows, cols, x, P, radii, rnd, t, sigma, a, b, confirm_hits, clas
 def _sym2_lmax(a, b, c):
     """The largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]] (closed form)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+
+
+@kernel
+def _predict_tracks(x, P, F, Q):
+    """``kalman.kf_predict`` (its reference) in place: x = F x, P = F P F^T + Q for every track (4x4 products summed
+    in index order)."""
+    xn = np.empty(4)
+    T = np.empty((4, 4))
+    for i in range(x.shape[0]):
+        for a in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += F[a, c] * x[i, c]
+            xn[a] = acc
+        for a in range(4):
+            x[i, a] = xn[a]
+            for b in range(4):
+                acc = 0.0
+                for c in range(4):
+                    acc += F[a, c] * P[i, c, b]
+                T[a, b] = acc
+        for a in range(4):
+            for b in range(4):
+                acc = 0.0
+                for c in range(4):
+                    acc += T[a, c] * F[b, c]
+                P[i, a, b] = acc + Q[a, b]
 
 
 @kernel
@@ -344,7 +371,8 @@ class Tracker:
     def predict(self, t: float) -> None:
         """Propagate every track to time t (constant velocity, eq:obs_prop (2); covariance grows)."""
         if self.t is not None and len(self) and t > self.t:
-            self.x, self.P = kf_predict(self.x, self.P, t - self.t, self.params.accel_psd_m2ps3)
+            F, Q = cv_model(float(t - self.t), float(self.params.accel_psd_m2ps3))
+            _predict_tracks(self.x, self.P, F, Q)
             self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)
         self.t = t
 

@@ -74,3 +74,18 @@ def test_compiled_report_matches_the_numpy_reference():
     assert np.array_equal(p, p0)
     np.testing.assert_allclose(cov, c0, rtol=1e-12, atol=1e-15)
     assert not np.allclose(cov, np.where(st[:, None, None], T.Ps[idx], T.P[idx, :2, :2]))     # some were capped
+
+
+def test_compiled_prediction_matches_kf_predict():
+    """Tracker.predict (compiled: tracker._predict_tracks) against kalman.kf_predict (x' = F x, P' = F P F^T + Q)."""
+    from bigcbf.perception.kalman import cv_model, kf_predict
+    from bigcbf.perception.tracker import _predict_tracks
+    rng = np.random.default_rng(9)
+    x, P = rng.normal(size=(7, 4)), _spd(rng, 7, 4, 0.3)
+    for dt in (0.1, 0.05, 1.3):
+        F, Q = cv_model(dt, 0.5)
+        xr, Pr = kf_predict(x, P, dt, 0.5)
+        xc, Pc = x.copy(), P.copy()
+        _predict_tracks(xc, Pc, F, Q)
+        np.testing.assert_allclose(xc, xr, rtol=1e-13, atol=1e-14)
+        np.testing.assert_allclose(Pc, Pr, rtol=1e-12, atol=1e-14)
