@@ -224,84 +224,91 @@ def _surface_tolerance(P, conf, merge_tol, out):
 
 
 @kernel
+def _cv_update(i, j, x, P, z, R, Kg, A, T, Pn):
+    """Track i's CV filter with measurement j (``kalman.kf_update``): S = P_pp + R, K = P H^T S^-1 (closed-form 2x2
+    inverse), x += K (z - H x), P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), symmetrised; Kg (4, 2), A, T, Pn
+    (4, 4) are scratch."""
+    r00, r01, r10, r11 = R[j, 0, 0], R[j, 0, 1], R[j, 1, 0], R[j, 1, 1]
+    s00, s01, s10, s11 = P[i, 0, 0] + r00, P[i, 0, 1] + r01, P[i, 1, 0] + r10, P[i, 1, 1] + r11
+    det = s00 * s11 - s01 * s10
+    i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+    for a in range(4):
+        Kg[a, 0] = P[i, a, 0] * i00 + P[i, a, 1] * i10
+        Kg[a, 1] = P[i, a, 0] * i01 + P[i, a, 1] * i11
+    y0, y1 = z[j, 0] - x[i, 0], z[j, 1] - x[i, 1]
+    for a in range(4):
+        x[i, a] += Kg[a, 0] * y0 + Kg[a, 1] * y1
+    for a in range(4):                                     # A = I - K H
+        for b in range(4):
+            A[a, b] = (1.0 if a == b else 0.0) - (Kg[a, b] if b < 2 else 0.0)
+    for a in range(4):                                     # T = A P
+        for b in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += A[a, c] * P[i, c, b]
+            T[a, b] = acc
+    for a in range(4):                                     # Pn = T A^T + K R K^T
+        for b in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += T[a, c] * A[b, c]
+            kr0 = Kg[a, 0] * r00 + Kg[a, 1] * r10
+            kr1 = Kg[a, 0] * r01 + Kg[a, 1] * r11
+            Pn[a, b] = acc + kr0 * Kg[b, 0] + kr1 * Kg[b, 1]
+    for a in range(4):
+        for b in range(4):
+            P[i, a, b] = 0.5 * (Pn[a, b] + Pn[b, a])
+
+
+@kernel
+def _static_update(i, j, x, P, xs, Ps, z, R, gate_chi2):
+    """Track i's constant-position filter with measurement j (``kalman.static_update``): the Joseph-form update of
+    xs, Ps, symmetrised, restarted from the CV filter's (already updated) position block where the two disagree
+    beyond gate_chi2 (``kalman.mahalanobis2``)."""
+    r00, r01, r10, r11 = R[j, 0, 0], R[j, 0, 1], R[j, 1, 0], R[j, 1, 1]
+    p00, p01, p10, p11 = Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1]
+    s00, s01, s10, s11 = p00 + r00, p01 + r01, p10 + r10, p11 + r11
+    det = s00 * s11 - s01 * s10
+    i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+    k00, k01 = p00 * i00 + p01 * i10, p00 * i01 + p01 * i11
+    k10, k11 = p10 * i00 + p11 * i10, p10 * i01 + p11 * i11
+    e0, e1 = z[j, 0] - xs[i, 0], z[j, 1] - xs[i, 1]
+    xs0, xs1 = xs[i, 0] + k00 * e0 + k01 * e1, xs[i, 1] + k10 * e0 + k11 * e1
+    a00, a01, a10, a11 = 1.0 - k00, -k01, -k10, 1.0 - k11
+    t00, t01 = a00 * p00 + a01 * p10, a00 * p01 + a01 * p11
+    t10, t11 = a10 * p00 + a11 * p10, a10 * p01 + a11 * p11
+    kr00, kr01 = k00 * r00 + k01 * r10, k00 * r01 + k01 * r11
+    kr10, kr11 = k10 * r00 + k11 * r10, k10 * r01 + k11 * r11
+    q00 = t00 * a00 + t01 * a01 + kr00 * k00 + kr01 * k01
+    q01 = t00 * a10 + t01 * a11 + kr00 * k10 + kr01 * k11
+    q10 = t10 * a00 + t11 * a01 + kr10 * k00 + kr11 * k01
+    q11 = t10 * a10 + t11 * a11 + kr10 * k10 + kr11 * k11
+    q01 = q10 = 0.5 * (q01 + q10)
+    c00, c01, c10, c11 = P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1]
+    m00, m01, m10, m11 = q00 + c00, q01 + c01, q10 + c10, q11 + c11
+    d0, d1 = xs0 - x[i, 0], xs1 - x[i, 1]
+    md = m00 * m11 - m01 * m10
+    if (m11 * d0 * d0 - (m01 + m10) * d0 * d1 + m00 * d1 * d1) / md > gate_chi2:
+        xs[i, 0], xs[i, 1] = x[i, 0], x[i, 1]
+        Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1] = c00, c01, c10, c11
+    else:
+        xs[i, 0], xs[i, 1] = xs0, xs1
+        Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1] = q00, q01, q10, q11
+
+
+@kernel
 def _measurement_update(rows, cols, x, P, xs, Ps, z, R, gate_chi2, sigma, sv_hit):
-    """The measurement updates of :meth:`Tracker.step`, track rows[k] with measurement cols[k], in place:
-
-    - the CV filter (``kalman.kf_update``, its reference): S = P_pp + R, K = P H^T S^-1 (closed-form 2x2
-      inverse), x += K (z - H x), P = (I - K H) P (I - K H)^T + K R K^T (Joseph form), symmetrised;
-    - the constant-position filter (``kalman.static_update``, its reference) on xs, Ps, restarted from
-      the CV filter's position block when the two disagree beyond gate_chi2 (``kalman.mahalanobis2``);
-    - sigma[k]: the speed's standard deviation (``classify.speed_sigma``), and sv_hit[i] the largest velocity
-      standard deviation, of the updated filter.
-
-    The formulas are the references' term by term; their sums run in another order (to rounding:
+    """The measurement updates of :meth:`Tracker.step`, track rows[k] with measurement cols[k], in place: the CV
+    filter (:func:`_cv_update`; ``kalman.kf_update`` its reference), the constant-position filter
+    (:func:`_static_update`; ``kalman.static_update``), and sigma[k] the speed's standard deviation
+    (``classify.speed_sigma``) and sv_hit[i] the largest velocity standard deviation of the updated filter. The
+    formulas are the references' term by term; their sums run in another order (to rounding:
     tests/perception/test_tracker_compiled.py)."""
-    Kg = np.empty((4, 2))
-    A = np.empty((4, 4))
-    T = np.empty((4, 4))
-    Pn = np.empty((4, 4))
+    Kg, A, T, Pn = np.empty((4, 2)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
     for k in range(rows.shape[0]):
         i, j = rows[k], cols[k]
-        r00, r01, r10, r11 = R[j, 0, 0], R[j, 0, 1], R[j, 1, 0], R[j, 1, 1]
-        s00, s01, s10, s11 = P[i, 0, 0] + r00, P[i, 0, 1] + r01, P[i, 1, 0] + r10, P[i, 1, 1] + r11
-        det = s00 * s11 - s01 * s10
-        i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
-        for a in range(4):
-            Kg[a, 0] = P[i, a, 0] * i00 + P[i, a, 1] * i10
-            Kg[a, 1] = P[i, a, 0] * i01 + P[i, a, 1] * i11
-        y0, y1 = z[j, 0] - x[i, 0], z[j, 1] - x[i, 1]
-        for a in range(4):
-            x[i, a] += Kg[a, 0] * y0 + Kg[a, 1] * y1
-        for a in range(4):                                     # A = I - K H
-            for b in range(4):
-                A[a, b] = (1.0 if a == b else 0.0) - (Kg[a, b] if b < 2 else 0.0)
-        for a in range(4):                                     # T = A P
-            for b in range(4):
-                acc = 0.0
-                for c in range(4):
-                    acc += A[a, c] * P[i, c, b]
-                T[a, b] = acc
-        for a in range(4):                                     # Pn = T A^T + K R K^T
-            for b in range(4):
-                acc = 0.0
-                for c in range(4):
-                    acc += T[a, c] * A[b, c]
-                kr0 = Kg[a, 0] * r00 + Kg[a, 1] * r10
-                kr1 = Kg[a, 0] * r01 + Kg[a, 1] * r11
-                Pn[a, b] = acc + kr0 * Kg[b, 0] + kr1 * Kg[b, 1]
-        for a in range(4):
-            for b in range(4):
-                P[i, a, b] = 0.5 * (Pn[a, b] + Pn[b, a])
-        # the constant-position filter
-        p00, p01, p10, p11 = Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1]
-        s00, s01, s10, s11 = p00 + r00, p01 + r01, p10 + r10, p11 + r11
-        det = s00 * s11 - s01 * s10
-        i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
-        k00, k01 = p00 * i00 + p01 * i10, p00 * i01 + p01 * i11
-        k10, k11 = p10 * i00 + p11 * i10, p10 * i01 + p11 * i11
-        e0, e1 = z[j, 0] - xs[i, 0], z[j, 1] - xs[i, 1]
-        xs0, xs1 = xs[i, 0] + k00 * e0 + k01 * e1, xs[i, 1] + k10 * e0 + k11 * e1
-        a00, a01, a10, a11 = 1.0 - k00, -k01, -k10, 1.0 - k11
-        t00, t01 = a00 * p00 + a01 * p10, a00 * p01 + a01 * p11
-        t10, t11 = a10 * p00 + a11 * p10, a10 * p01 + a11 * p11
-        kr00, kr01 = k00 * r00 + k01 * r10, k00 * r01 + k01 * r11
-        kr10, kr11 = k10 * r00 + k11 * r10, k10 * r01 + k11 * r11
-        q00 = t00 * a00 + t01 * a01 + kr00 * k00 + kr01 * k01
-        q01 = t00 * a10 + t01 * a11 + kr00 * k10 + kr01 * k11
-        q10 = t10 * a00 + t11 * a01 + kr10 * k00 + kr11 * k01
-        q11 = t10 * a10 + t11 * a11 + kr10 * k10 + kr11 * k11
-        q01 = q10 = 0.5 * (q01 + q10)
-        c00, c01, c10, c11 = P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1]
-        m00, m01, m10, m11 = q00 + c00, q01 + c01, q10 + c10, q11 + c11
-        d0, d1 = xs0 - x[i, 0], xs1 - x[i, 1]
-        md = m00 * m11 - m01 * m10
-        if (m11 * d0 * d0 - (m01 + m10) * d0 * d1 + m00 * d1 * d1) / md > gate_chi2:
-            xs[i, 0], xs[i, 1] = x[i, 0], x[i, 1]
-            Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1] = c00, c01, c10, c11
-        else:
-            xs[i, 0], xs[i, 1] = xs0, xs1
-            Ps[i, 0, 0], Ps[i, 0, 1], Ps[i, 1, 0], Ps[i, 1, 1] = q00, q01, q10, q11
-        # the speed's standard deviation and the largest velocity standard deviation
+        _cv_update(i, j, x, P, z, R, Kg, A, T, Pn)
+        _static_update(i, j, x, P, xs, Ps, z, R, gate_chi2)
         v0, v1 = x[i, 2], x[i, 3]
         va, vb, vc = P[i, 2, 2], P[i, 2, 3], P[i, 3, 3]
         lmax = _sym2_lmax(va, vb, vc)
