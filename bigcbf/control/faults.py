@@ -127,20 +127,15 @@ def _usable(p, v, cov, r, max_pos, max_v, max_r, max_cov):
     """M >= 1 obstacles: every position, velocity, covariance and radius finite; |p| <= max_pos and |v| <= max_v per
     component; 0 <= r <= max_r; each covariance symmetric to the bit, with a, c >= 0, a c >= b^2 and a + c <= max_cov
     (a, b, c its entries). The comparisons of the numpy formulation it replaced, element by element."""
-    M = p.shape[0]
-    for i in range(M):
+    for i in range(p.shape[0]):
         for k in range(2):
-            if not (math.isfinite(p[i, k]) and math.isfinite(v[i, k])):
+            if not (math.isfinite(p[i, k]) and abs(p[i, k]) <= max_pos and math.isfinite(v[i, k])
+                    and abs(v[i, k]) <= max_v):
                 return False
             for j in range(2):
                 if not math.isfinite(cov[i, k, j]):
                     return False
-        if not math.isfinite(r[i]):
-            return False
-    for i in range(M):
-        if abs(p[i, 0]) > max_pos or abs(p[i, 1]) > max_pos or abs(v[i, 0]) > max_v or abs(v[i, 1]) > max_v:
-            return False
-        if r[i] < 0 or r[i] > max_r:
+        if not (math.isfinite(r[i]) and 0 <= r[i] <= max_r):
             return False
         a, b, b2, c = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 0], cov[i, 1, 1]
         if b != b2 or a < 0 or c < 0 or not a * c >= b * b or a + c > max_cov:

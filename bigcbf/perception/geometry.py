@@ -288,8 +288,8 @@ def fit_rectangle(points: np.ndarray, sensor: np.ndarray, full: bool = False):
     return center, long_ / np.sqrt(2), rms
 
 
-#: the fine search's offsets as above, for the compiled fit
-_FINE_C = np.ascontiguousarray(_FINE)
+#: the coarse search's axes as above, per component, for the compiled fit
+_COARSE_COS, _COARSE_SIN = np.ascontiguousarray(_COARSE_E1[:, 0]), np.ascontiguousarray(_COARSE_E1[:, 1])
 
 
 @kernel
@@ -318,14 +318,14 @@ def _rect_search(P, lo, n, e1x, e1y, e2x, e2y, best):
 
 
 @kernel
-def _rect_fit(P, lo, n, sx, sy, coarse, fine, out):
+def _rect_fit(P, lo, n, sx, sy, coarse, ccos, csin, fine, out):
     """:func:`fit_rectangle` (its numpy reference) of the points P[lo:lo+n], seen from the sensor (sx, sy), compiled:
     out = (centre x, y, radius, rms, e1 x, y, e2 x, y, la, lb). The same search (1-degree steps over 0..89 degrees,
-    then +-1 degree in 0.05-degree steps), sums in point order, cos and sin of the compiled code: equal to the
-    reference to rounding (tests/perception/test_geometry_compiled.py)."""
+    then +-1 degree in 0.05-degree steps; ``ccos``, ``csin`` the coarse angles' cosines and sines), sums in point
+    order, the fine angles' cos and sin of the compiled code: equal to the reference to rounding
+    (tests/perception/test_geometry_compiled.py)."""
     best = np.empty(5)
-    e1x, e1y = np.cos(coarse), np.sin(coarse)
-    k = _rect_search(P, lo, n, e1x, e1y, -e1y, e1x, best)
+    k = _rect_search(P, lo, n, ccos, csin, -csin, ccos, best)
     ang = coarse[k] + fine
     f1x, f1y = np.cos(ang), np.sin(ang)
     j = _rect_search(P, lo, n, f1x, f1y, -f1y, f1x, best)
@@ -601,7 +601,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         if tol[j] > 0 and rms[j] <= tol[j]:
             rms_rect = np.inf
         else:
-            _rect_fit(P, lo, nj, sx, sy, _COARSE, _FINE_C, rect)
+            _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
             fitted_rect, rms_rect = True, float(rect[3])
         if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
             cov = _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
@@ -610,7 +610,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
                                    bool(rms[j] <= rms_rect)))
             continue
         if not fitted_rect:
-            _rect_fit(P, lo, nj, sx, sy, _COARSE, _FINE_C, rect)
+            _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
         _rect_cov(P, lo, nj, sx, sy, rect[4], rect[5], rect[6], rect[7], rect[8], rect[9], float(sp.angle_increment),
                   float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_max_m), cov_r)
         out.append(Measurement(rect[:2].copy(), float(np.clip(rect[2], pr.radius_min_m, pr.radius_max_m)), False,

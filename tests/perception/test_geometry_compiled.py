@@ -331,7 +331,8 @@ def test_compiled_rectangle_and_refit_match_their_numpy_references():
         pts = pts + rng.normal(0, 0.01, pts.shape)
         sensor = c - 3.0 * (e1 + e2) / np.sqrt(2)
         P = np.ascontiguousarray(np.r_[rng.normal(size=(3, 2)), pts])         # at an offset in a longer array
-        G._rect_fit(P, 3, len(pts), float(sensor[0]), float(sensor[1]), G._COARSE, G._FINE_C, out)
+        G._rect_fit(P, 3, len(pts), float(sensor[0]), float(sensor[1]), G._COARSE, G._COARSE_COS, G._COARSE_SIN,
+                    G._FINE, out)
         center, radius, rms, axes, (la, lb) = G.fit_rectangle(pts, sensor, full=True)
         np.testing.assert_allclose(out[:2], center, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(out[2:4], (radius, rms), rtol=1e-9, atol=1e-12)
