@@ -258,7 +258,7 @@ class Episode:
         mount = self.perception.params
         self.route = None if route is None or not route.enabled else RouteLayer(
             route, params.uncertainty.r_robot_m, params.uncertainty.d0_m,
-            (mount.laser_x_m, mount.laser_y_m, mount.laser_yaw_rad))
+            (mount.laser_x_m, mount.laser_y_m, mount.laser_yaw_rad), arrive_m=params.eps_g_m)
         self.observers: list[Callable[[StepRecord], None]] = []
         # results that would be false without a word (bigcbf/sanity.py): warnings beside MuJoCo's, and their lines
         self.sanity_warnings, self.notes = sensor_check(self.world.scene, self.world.lidar.config, params,

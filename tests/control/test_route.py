@@ -138,6 +138,29 @@ def test_the_local_goal_is_the_look_ahead_point_in_sight_and_the_goal_within_rea
     assert np.array_equal(rl.local_goal(0.6, near, np.array([4.0, 0.0])), [4.0, 0.0])
 
 
+@pytest.mark.parametrize("arrive_m, want_goal", [(0.0, False), (0.15, True)])
+def test_a_look_ahead_point_within_the_arrival_tolerance_gives_way_to_the_goal(arrive_m, want_goal):
+    """A cell still marked 0.1 m beyond the goal (a person who stood there and left while no beam came back through
+    it) hides the goal from the visibility test; the look-ahead point is then the path point before the goal. With
+    the robot within the arrival tolerance eps_g of that point a method stops there as arrived, short of the goal,
+    until the time limit (dev world doorway_00004, route on: every method 0.2-0.35 m short): the layer hands the
+    goal instead. Without a tolerance (arrive_m 0) the point stays."""
+    rl = RouteLayer(RouteParams(enabled=True), r_robot_m=0.15, d0_m=0.10, arrive_m=arrive_m)
+    goal = np.array([4.09, 0.0])                                        # off the cells' centres, as a goal is
+    rl.reset((0.0, 0.0), goal)
+    g = rl.grid
+    g.logodds[g.cell((4.05, -0.1))] = rl.params.l_max                   # the stale cell beside the goal
+    pos = np.array([3.84, 0.05])
+    lg = rl.local_goal(0.0, RobotState(*pos, 0.0), goal)
+    assert not rl._visible(pos, goal) and np.allclose(rl.path[-2], [3.95, 0.05])
+    if want_goal:
+        assert np.array_equal(lg, goal)
+    else:                                                               # the path point 0.11 m away: "arrived"
+        assert np.allclose(lg, [3.95, 0.05]) and np.linalg.norm(lg - pos) <= 0.15
+    far = rl.local_goal(0.1, RobotState(2.0, 0.0, 0.0), goal)            # farther away: the usual look-ahead point
+    assert np.linalg.norm(far - [2.0, 0.0]) > 1.0 and not np.array_equal(far, goal)
+
+
 def test_a_walled_off_goal_hands_the_goal_itself():
     rl = layer()
     g = rl.grid
