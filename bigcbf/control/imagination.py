@@ -176,6 +176,21 @@ def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams) -> 
     return _PREDICTED[1]
 
 
+_CAPPED: list = [None, None, None]      # the last (cov, k_cap, capped) of _capped
+
+
+def _capped(cov: np.ndarray, kc: int) -> np.ndarray:
+    """The rule prediction_cap (:class:`~bigcbf.params.stack.PlusRules`): the predicted covariances (N+1, M, 2, 2)
+    of eq:cov_prop (3) held at step ``kc`` from there on, kept for the next rollout of the same predictions (read-only,
+    as theirs)."""
+    if _CAPPED[0] is cov and _CAPPED[1] == kc:
+        return _CAPPED[2]
+    out = cov[np.minimum(np.arange(cov.shape[0]), kc)]
+    out.flags.writeable = False
+    _CAPPED[:] = [cov, kc, out]
+    return out
+
+
 _PRED_TERM: list = [None, None, None]   # the last (cov, beta, term) of _prediction_term
 
 
@@ -225,6 +240,10 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Ok = np.zeros((N + 1, 0), complex)
     if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
         Oc, cov = _predicted(obstacles, N, dt, params)
+        if rules.prediction_cap:                                      # the growth held from k_cap on
+            kc = int(round(rules.prediction_cap_s / dt))
+            if kc < N:
+                cov = _capped(cov, kc)
         Ok = Oc                                                       # (N+1, M)
         if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)

@@ -348,6 +348,9 @@ class PlusRules:
     - ``last_resort`` (issue 23): the common filter's last resort in big-cbf-plus's episodes, one of
       ``LAST_RESORTS`` (``StackParams.cbf_last_resort``; "slack" is the run's default). "passive" by default: on
       the generated test split it removed the one at-fault contact of "slack" (docs/fidelity.md).
+    - ``prediction_cap`` (issue 25): in the imagination, the predicted covariance of eq:cov_prop (3) grows only up to
+      ``prediction_cap_s`` ahead and is held there (Sigma_{i,k} = Sigma_{i,min(k, k_cap)}); the common filter is
+      unchanged (it reads the tracks' own covariances). Off: the paper's growth over the whole horizon.
     """
 
     in_way_band: bool = True  # "in the way" within the band in_way_margin_m beyond r_R + r_i + d0 [on/off]
@@ -369,6 +372,8 @@ class PlusRules:
     long_horizon: bool = True  # rollouts long_horizon_s long; the extra steps test only movers (off: N dt) [on/off]
     long_horizon_s: float = ranged(2.5, 0.1, 10)  # the rollouts' length with long_horizon [s]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
+    prediction_cap: bool = False  # the imagination's eq:cov_prop growth stops at prediction_cap_s [on/off]
+    prediction_cap_s: float = ranged(0.5, 0, 10)  # where the growth stops (prediction_cap) [s]
 
     def __post_init__(self):
         check_field_ranges(self)
@@ -376,7 +381,7 @@ class PlusRules:
             if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
                 raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
         check_last_resort("last_resort", self.last_resort)
-        for k in ("in_way_margin_m", "relevant_range_m", "long_horizon_s"):
+        for k in ("in_way_margin_m", "relevant_range_m", "long_horizon_s", "prediction_cap_s"):
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")
 

@@ -178,6 +178,26 @@ def test_noshared_uses_fixed_margin():
     assert shared.h_min[0] == pytest.approx(h.min()) == pytest.approx(0.450911, abs=1e-6)
 
 
+@pytest.mark.parametrize("cap_s, k_cap", [(0.0, 0), (0.5, 5), (1.5, 15)])
+def test_prediction_cap_holds_the_covariance_growth_by_hand(cap_s, k_cap):
+    """The rule prediction_cap (PlusRules, issue 25): eq:cov_prop (3) grows Sigma_k = Sigma_0 + q dt k I up to k_cap =
+    cap_s / dt and holds it there, in the imagination's margins (eq:uncertainty_margin (21)); the scene of
+    test_noshared_uses_fixed_margin (Sigma_0 = 0.01 I, q 0.01 m^2/s, dt 0.1 s, u = 0): m_k = 0.05 + 2 sqrt(0.01 +
+    0.001 min(k, k_cap)) + 0.003 + 0.025, D_k = 0.45 + m_k, ||q_k||^2 = 1 + (0.05 k)^2. A cap at the horizon (1.5 s)
+    changes nothing; the paper's big-cbf never holds it."""
+    obs = Obstacles.from_lists([[1.0, 0.0]], v=[[0.0, 0.5]], r=0.2, cov=np.eye(2) * 0.01, static=False)
+    state, goal = RobotState(0, 0, 0), np.array([0.0, 0.1])
+    rules = dataclasses.replace(PAPER_RULES, prediction_cap=True, prediction_cap_s=cap_s)
+    img = imagine(state, obs, goal, SIMULATION, rules=rules)
+    k = np.arange(16)
+    m = 0.05 + 2 * np.sqrt(0.01 + 0.001 * np.minimum(k, k_cap)) + 0.003 + 0.025
+    np.testing.assert_allclose(img.margin[0, :, 0], m, rtol=1e-12)
+    h = 1 + (0.05 * k) ** 2 - (0.45 + m) ** 2
+    assert img.h_min[0] == pytest.approx(h.min(), abs=1e-12)
+    paper = imagine(state, obs, goal, SIMULATION)
+    assert (img.margin[0, -1, 0] < paper.margin[0, -1, 0]) == (k_cap < 15)
+
+
 def test_empty_scene():
     img = imagine(RobotState(0, 0, 0), Obstacles.empty(), np.array([3.0, 0.0]), SIMULATION)
     assert np.all(np.isinf(img.h_min)) and np.all(img.W == 0)
