@@ -161,34 +161,23 @@ class _Governed:
 _PREDICTED: list = [None, None]  # the last (key, (Oc, cov)) of _predicted
 
 
-def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams) -> tuple[np.ndarray, np.ndarray]:
+def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams,
+               k_cap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The predicted obstacle positions (N+1, M) complex and covariances (N+1, M, 2, 2) (eq:obs_prop (2),
     eq:cov_prop (3), eq:predicted_obstacles (4); ``prediction.predict_obstacles``), kept for the next rollout of
-    the same obstacles (the fallback's, in the same selection). Read-only for their users."""
+    the same obstacles (the fallback's, in the same selection). Read-only for their users. ``k_cap`` (the rule
+    prediction_cap, :class:`~bigcbf.params.stack.PlusRules`): the covariances held at step k_cap from there on."""
     q = q_sigma_for(obstacles, params.uncertainty)
     key = (np.asarray(obstacles.p, float).tobytes(), np.asarray(obstacles.v, float).tobytes(),
-           np.asarray(obstacles.cov, float).tobytes(), np.asarray(q, float).tobytes(), int(N), float(dt))
+           np.asarray(obstacles.cov, float).tobytes(), np.asarray(q, float).tobytes(), int(N), float(dt), k_cap)
     if _PREDICTED[0] != key:
         P_obs, cov = predict_obstacles(obstacles, N, dt, q)
+        if k_cap is not None and k_cap < N:
+            cov = cov[np.minimum(np.arange(N + 1), k_cap)]
         Oc = P_obs[..., 0] + 1j * P_obs[..., 1]
         Oc.flags.writeable = cov.flags.writeable = False          # shared by the rollouts that reuse them
         _PREDICTED[:] = [key, (Oc, cov)]
     return _PREDICTED[1]
-
-
-_CAPPED: list = [None, None, None]      # the last (cov, k_cap, capped) of _capped
-
-
-def _capped(cov: np.ndarray, kc: int) -> np.ndarray:
-    """The rule prediction_cap (:class:`~bigcbf.params.stack.PlusRules`): the predicted covariances (N+1, M, 2, 2)
-    of eq:cov_prop (3) held at step ``kc`` from there on, kept for the next rollout of the same predictions (read-only,
-    as theirs)."""
-    if _CAPPED[0] is cov and _CAPPED[1] == kc:
-        return _CAPPED[2]
-    out = cov[np.minimum(np.arange(cov.shape[0]), kc)]
-    out.flags.writeable = False
-    _CAPPED[:] = [cov, kc, out]
-    return out
 
 
 _PRED_TERM: list = [None, None, None]   # the last (cov, beta, term) of _prediction_term
@@ -239,11 +228,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Oc = cov = governed = None
     Ok = np.zeros((N + 1, 0), complex)
     if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
-        Oc, cov = _predicted(obstacles, N, dt, params)
-        if rules.prediction_cap:                                      # the growth held from k_cap on
-            kc = int(round(rules.prediction_cap_s / dt))
-            if kc < N:
-                cov = _capped(cov, kc)
+        k_cap = int(round(rules.prediction_cap_s / dt)) if rules.prediction_cap else None
+        Oc, cov = _predicted(obstacles, N, dt, params, k_cap)
         Ok = Oc                                                       # (N+1, M)
         if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)

@@ -34,8 +34,8 @@ pose at each scan, the perception's obstacle estimates), never the simulator.
    once it is within that reach. A point within the methods' arrival tolerance eps_g of the robot (where a
    method stops as arrived) gives way to the first path point beyond it: near the goal, a cell still marked where
    a person stood and left unseen (a beam without a return clears nothing) hides the goal from the visibility test
-   and would hold every method 0.1-0.3 m short of it until the time limit. No path (the goal is walled off on the map): the goal itself, as without the
-   route layer. Success is still judged on the real goal (bigcbf/episode.py).
+   and would hold every method 0.1-0.3 m short of it until the time limit. No path (the goal is walled off on the
+   map): the goal itself, as without the route layer. Success is still judged on the real goal (bigcbf/episode.py).
 
 Limitations (documented choices): the map is in odom, so odometry drift skews it slowly (Nav2's global costmap
 lives in the map frame of a SLAM or localisation node, which this stack does not have); there is no path
