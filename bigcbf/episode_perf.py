@@ -10,6 +10,11 @@
   contacts and solver work as the episode (the drive at constant targets has fewer contacts: it is the cheaper
   physics), timed in the same run.
 - ``episode_replay_ratio``: ``episode_realtime_factor`` over that: the stack's and the loop's share alone.
+- before the timed episode, the same episode once untimed (deterministic: the same code paths), so that what the
+  first call of a compiled kernel costs (numba compiles it, or loads it from its cache, in the first process
+  after an install) is not in the figures: the first ``bigcbf perf`` after ``make setup`` read a ratio of 0.066
+  for 0.36 without it (a 3-s warm-up in another scene left kernels that scene never calls: 0.036 with an empty
+  numba cache).
 - ``episode_route_tick_mean_ms`` (with the route layer on, ``big-cbf-plus`` in ``bigcbf perf``): the route
   layer's time (map updates, replans, look-ahead points) per control tick of that episode.
 """
@@ -25,6 +30,7 @@ from .sim.perf import bare_physics_realtime_factor, replay_realtime_factor
 def episode_figures(method: str, quick: bool = False, route: RouteParams | None = None) -> dict:
     """The figures of the module docstring for one ``method`` episode (``route``: its route layer, off by default)."""
     sc = load_scenario("single_person_crossing" if quick else "mixed_dense_traffic", 0)
+    Episode(sc, method, 0, SIMULATION, perception="lidar", route=route).run()       # the warm-up (docstring)
     ep = Episode(sc, method, 0, SIMULATION, perception="lidar", route=route)
     log = ep.world.record_blocks()
     res = ep.run()
