@@ -198,6 +198,41 @@ def test_prediction_cap_holds_the_covariance_growth_by_hand(cap_s, k_cap):
     assert (img.margin[0, -1, 0] < paper.margin[0, -1, 0]) == (k_cap < 15)
 
 
+def test_prediction_cap_escapable_holds_only_the_obstacles_slower_than_v_max():
+    """prediction_cap_scope "escapable" (PlusRules, issue 25): the cap holds eq:cov_prop (3) only for obstacles
+    slower than v_max (0.8 m/s), which the robot can back away from. Robot at the origin; A at (1, 0.6) walking at
+    0.5 m/s (held), B at (1, -0.6) at 1.2 m/s (growing as in the paper); Sigma_0 = 0.01 I, q 0.01 m^2/s, dt 0.1 s,
+    cap at 0: YIELD stands still, so the margin moves only with the prediction term, 0 for A and 2 sqrt(0.01 +
+    0.001 k) - 0.2 for B."""
+    obs = Obstacles.from_lists([[1.0, 0.6], [1.0, -0.6]], v=[[0.5, 0.0], [-1.2, 0.0]], r=0.2,
+                               cov=np.eye(2) * 0.01, static=False)
+    state, goal = RobotState(0, 0, 0), np.array([0.0, 0.1])
+    rules = dataclasses.replace(PAPER_RULES, prediction_cap=True, prediction_cap_s=0.0,
+                                prediction_cap_scope="escapable")
+    img = imagine(state, obs, goal, SIMULATION, rules=rules, modes=("YIELD",))
+    paper = imagine(state, obs, goal, SIMULATION, modes=("YIELD",))
+    k = np.arange(16)
+    np.testing.assert_allclose(img.margin[0, :, 0] - img.margin[0, 0, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(img.margin[0, :, 1] - img.margin[0, 0, 1], 2 * np.sqrt(0.01 + 0.001 * k) - 0.2,
+                               rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(img.margin[0, :, 1], paper.margin[0, :, 1])
+    everyone = imagine(state, obs, goal, SIMULATION, modes=("YIELD",),
+                       rules=dataclasses.replace(rules, prediction_cap_scope="all"))
+    np.testing.assert_allclose(everyone.margin[0, :, 1] - everyone.margin[0, 0, 1], 0.0, atol=1e-12)
+
+
+def test_prediction_cap_scope_is_checked(tmp_path):
+    from bigcbf.config import load_run_config
+    from bigcbf.errors import FieldError, UserError
+    with pytest.raises(FieldError, match="must be one of all, escapable") as e:
+        dataclasses.replace(PAPER_RULES, prediction_cap_scope="sideways")
+    assert e.value.field == "prediction_cap_scope"
+    f = tmp_path / "run.toml"
+    f.write_text('[methods.big-cbf-plus]\nprediction_cap_scope = "sideways"\n')
+    with pytest.raises(UserError, match=r"run.toml.*prediction_cap_scope.*must be one of"):
+        load_run_config(f)
+
+
 def test_empty_scene():
     img = imagine(RobotState(0, 0, 0), Obstacles.empty(), np.array([3.0, 0.0]), SIMULATION)
     assert np.all(np.isinf(img.h_min)) and np.all(img.W == 0)
