@@ -28,6 +28,12 @@ def reference(state, obs, goal, params, modes, shared, current, rules=PAPER_RULE
     N, dt = params.N, params.dt_s
     A, d = np.array(ex.A), np.array(ex.d)
     Pp, cov = predict_obstacles(obs, N, dt, q_sigma_for(obs, unc))
+    if rules.prediction_cap:             # the rule prediction_cap: Sigma_k held at k_cap, for its scope's obstacles
+        k_cap = int(round(rules.prediction_cap_s / dt))
+        for i in range(len(obs)):
+            if rules.prediction_cap_scope == "all" or math.hypot(*obs.v[i]) < params.v_max_mps:
+                for k in range(k_cap + 1, N + 1):
+                    cov[k, i] = cov[k_cap, i]
     dyn = bool(np.any(~obs.static & (obs.ids >= 0)))
     kap = unc.kappa_img if (unc.kappa_img_static is None or dyn) else unc.kappa_img_static
     groups = obstacle_groups(obs.p, obs.r, params)     # the groups of the obstacles at k = 0, as imagine() does

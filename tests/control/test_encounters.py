@@ -106,7 +106,7 @@ def test_the_papers_big_cbf_keeps_no_encounters_and_judges_at_full_speed():
     assert not PAPER_RULES.encounter_commitment and not PAPER_RULES.executed_speed
     assert BigCbfPlanner(P).encounters is None and BigCbfPlanner(P, shared=False).encounters is None
     plus = BigCbfPlusPlanner(P)
-    assert plus.encounters is not None and plus.rules.encounter_commitment and not plus.rules.executed_speed
+    assert plus.encounters is not None and plus.rules.encounter_commitment and plus.rules.executed_speed
     assert BigCbfPlusPlanner(P, PlusRules(encounter_commitment=False)).encounters is None
 
 
@@ -124,9 +124,10 @@ def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_ov
     walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
                                  ids=-np.ones(2 * len(xs), int))
     obs = walls.concat(Obstacles.from_lists([[0.9, -0.15]], v=[[0.3, 0.0]], r=0.25, ids=[5]))
-    img = imagine(st, obs, (9.0, 0.0), params, rules=PlusRules())
+    rules = PlusRules(prediction_cap=False)          # the paper's growth of the walker's covariance (see below)
+    img = imagine(st, obs, (9.0, 0.0), params, rules=rules)
     out, scale = judge_at_executed_speed(img, st, obs, (9.0, 0.0), params, shared=True, current=None,
-                                         rules=PlusRules())
+                                         rules=rules)
     gained = ~img.accepted & out.accepted
     # rejected at full speed: GOAL (into the walker's back) and PASS-R (its free side, 0.55 m of corridor);
     # at 0.35 v_max GOAL follows it, at 0.6 v_max PASS-R passes it
@@ -135,6 +136,27 @@ def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_ov
                                                              "SIDE-R": 1.0, "YIELD": 1.0})
     assert np.all(out.h_min[gained] >= 0.0) and np.all(img.h_min[gained] < -params.eps_h_m2)
     assert np.all(out.J[img.accepted] == img.J[img.accepted])                # full-speed rows untouched
+
+
+def test_with_the_default_cap_the_slow_walkers_free_side_passes_at_full_speed():
+    """The shipped big-cbf-plus (prediction_cap at 0 s for obstacles slower than v_max, PlusRules): in the corridor
+    above, PASS-R on the 0.3 m/s walker's free side, rejected with the paper's growth of its covariance, is
+    accepted at full speed (its h_min -0.193 -> +0.109 m^2 with the tuned stack); the same walker at 1.2 m/s, faster
+    than v_max 0.8 m/s, keeps the paper's growth: every candidate the same as without the cap."""
+    params = default_stack_params()
+    st = RobotState(0.0, 0.0, 0.0)
+    xs = np.arange(-0.5, 3.0, 0.25)
+    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
+                                 ids=-np.ones(2 * len(xs), int))
+    for v, changed in ((0.3, True), (1.2, False)):
+        obs = walls.concat(Obstacles.from_lists([[0.9, -0.15]], v=[[v, 0.0]], r=0.25, ids=[5]))
+        cap = imagine(st, obs, (9.0, 0.0), params, rules=PlusRules())
+        grown = imagine(st, obs, (9.0, 0.0), params, rules=PlusRules(prediction_cap=False))
+        assert np.array_equal(cap.h_min, grown.h_min) != changed
+        if changed:
+            i = cap.index("PASS-R")
+            assert grown.h_min[i] < -params.eps_h_m2 and cap.h_min[i] >= 0.0 and cap.accepted[i]
+            assert np.all(cap.h_min >= grown.h_min)
 
 
 def _recorded(modes_at):
@@ -170,7 +192,7 @@ def test_the_planner_runs_a_re_judged_mode_at_its_slower_speed():
     slowed = 0
     for y in (-0.15, 0.0, 0.15):          # a slow walker 0.9 m ahead in a 2.4 m corridor (see the test above)
         obs = walls.concat(Obstacles.from_lists([[0.9, y]], v=[[0.3, 0.0]], r=0.25, ids=[5]))
-        planner = BigCbfPlusPlanner(params, PlusRules(executed_speed=True))
+        planner = BigCbfPlusPlanner(params, PlusRules(executed_speed=True, prediction_cap=False))
         u, info = planner.plan(0.0, st, obs, (9.0, 0.0))
         img = imagine(st, obs, (9.0, 0.0), params, rules=planner.rules)
         _, scale = judge_at_executed_speed(img, st, obs, (9.0, 0.0), params, shared=True, current=None,
