@@ -162,21 +162,23 @@ _PREDICTED: list = [None, None]  # the last (key, (Oc, cov)) of _predicted
 
 
 def _predicted(obstacles: Obstacles, N: int, dt: float, params: StackParams,
-               k_cap: int | None = None, capped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+               k_cap: int | None = None, v_hold: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
     """The predicted obstacle positions (N+1, M) complex and covariances (N+1, M, 2, 2) (eq:obs_prop (2),
     eq:cov_prop (3), eq:predicted_obstacles (4); ``prediction.predict_obstacles``), kept for the next rollout of
     the same obstacles (the fallback's, in the same selection). Read-only for their users. ``k_cap`` (the rule
-    prediction_cap, :class:`~bigcbf.params.stack.PlusRules`): the covariances held at step k_cap from there on;
-    ``capped`` (M,) bool: only those obstacles' (None: all; ``PlusRules.prediction_cap_scope``)."""
+    prediction_cap, :class:`~bigcbf.params.stack.PlusRules`): the covariances held at step k_cap from there on,
+    for the obstacles slower than ``v_hold`` [m/s] (inf: all; v_max for ``PlusRules.prediction_cap_scope``
+    "escapable")."""
     q = q_sigma_for(obstacles, params.uncertainty)
     key = (np.asarray(obstacles.p, float).tobytes(), np.asarray(obstacles.v, float).tobytes(),
            np.asarray(obstacles.cov, float).tobytes(), np.asarray(q, float).tobytes(), int(N), float(dt), k_cap,
-           None if capped is None else np.asarray(capped, bool).tobytes())
+           float(v_hold))
     if _PREDICTED[0] != key:
         P_obs, cov = predict_obstacles(obstacles, N, dt, q)
         if k_cap is not None and k_cap < N:
             held = cov[np.minimum(np.arange(N + 1), k_cap)]
-            cov = held if capped is None else np.where(np.asarray(capped, bool)[None, :, None, None], held, cov)
+            slow = np.hypot(obstacles.v[:, 0], obstacles.v[:, 1]) < v_hold        # (M,): all when v_hold is inf
+            cov = np.where(slow[:, None, None], held, cov)
         Oc = P_obs[..., 0] + 1j * P_obs[..., 1]
         Oc.flags.writeable = cov.flags.writeable = False          # shared by the rollouts that reuse them
         _PREDICTED[:] = [key, (Oc, cov)]
@@ -232,10 +234,8 @@ def _rollout(state: RobotState, obstacles: Obstacles, goal, params: StackParams,
     Ok = np.zeros((N + 1, 0), complex)
     if M:       # predictions (eq:obs_prop (2), eq:cov_prop (3), eq:predicted_obstacles (4))
         k_cap = int(round(rules.prediction_cap_s / dt)) if rules.prediction_cap else None
-        capped = None
-        if k_cap is not None and rules.prediction_cap_scope == "escapable":   # what the robot can back away from
-            capped = np.hypot(obstacles.v[:, 0], obstacles.v[:, 1]) < params.v_max_mps
-        Oc, cov = _predicted(obstacles, N, dt, params, k_cap, capped)
+        v_hold = params.v_max_mps if rules.prediction_cap_scope == "escapable" else math.inf   # what it can outrun
+        Oc, cov = _predicted(obstacles, N, dt, params, k_cap, v_hold)
         Ok = Oc                                                       # (N+1, M)
         if rules.speed_governor and K.governed.any():
             governed = _Governed(K, obstacles, cov, params)

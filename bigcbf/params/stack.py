@@ -163,10 +163,15 @@ class UncertaintyParams:
 LAST_RESORTS = ("slack", "brake", "evade", "passive")
 
 
+def check_one_of(field: str, value, choices: tuple[str, ...]) -> None:
+    """A named choice of a parameter dataclass: ``value`` one of ``choices``, else a FieldError naming ``field``."""
+    if value not in choices:
+        raise FieldError(field, f"must be one of {', '.join(choices)}, got {str(value)[:40]!r}")
+
+
 def check_last_resort(field: str, value) -> None:
     """A last resort's name (StackParams.cbf_last_resort, PlusRules.last_resort): one of LAST_RESORTS."""
-    if value not in LAST_RESORTS:
-        raise FieldError(field, f"must be one of {', '.join(LAST_RESORTS)}, got {str(value)[:40]!r}")
+    check_one_of(field, value, LAST_RESORTS)
 
 
 @dataclass(frozen=True)
@@ -393,9 +398,7 @@ class PlusRules:
             if f.type in (bool, "bool") and not isinstance(getattr(self, f.name), bool):
                 raise FieldError(f.name, f"must be true or false, got {getattr(self, f.name)!r}")
         check_last_resort("last_resort", self.last_resort)
-        if self.prediction_cap_scope not in PREDICTION_CAP_SCOPES:
-            raise FieldError("prediction_cap_scope", f"must be one of {', '.join(PREDICTION_CAP_SCOPES)}, got "
-                                                     f"{self.prediction_cap_scope!r}")
+        check_one_of("prediction_cap_scope", self.prediction_cap_scope, PREDICTION_CAP_SCOPES)
         for k in ("in_way_margin_m", "relevant_range_m", "long_horizon_s", "prediction_cap_s"):
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")

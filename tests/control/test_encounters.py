@@ -110,6 +110,13 @@ def test_the_papers_big_cbf_keeps_no_encounters_and_judges_at_full_speed():
     assert BigCbfPlusPlanner(P, PlusRules(encounter_commitment=False)).encounters is None
 
 
+def _corridor_walls() -> Obstacles:
+    """The walls of a 2.4 m corridor along +x as wall points (every 0.25 m from x = -0.5 to 2.75)."""
+    xs = np.arange(-0.5, 3.0, 0.25)
+    return Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
+                                ids=-np.ones(2 * len(xs), int))
+
+
 def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_over_the_same_distance():
     params = default_stack_params()
     for s in SCALES:
@@ -120,9 +127,7 @@ def test_a_candidate_rejected_at_full_speed_is_judged_again_at_a_slower_speed_ov
         assert speed_params(params, s) is slow                               # cached
     st = RobotState(0.0, 0.0, 0.0)
     # a slow walker (0.3 m/s, the robot's way) 0.9 m ahead, 0.15 m right of the line, in a 2.4 m corridor
-    xs = np.arange(-0.5, 3.0, 0.25)
-    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
-                                 ids=-np.ones(2 * len(xs), int))
+    walls = _corridor_walls()
     obs = walls.concat(Obstacles.from_lists([[0.9, -0.15]], v=[[0.3, 0.0]], r=0.25, ids=[5]))
     rules = PlusRules(prediction_cap=False)          # the paper's growth of the walker's covariance (see below)
     img = imagine(st, obs, (9.0, 0.0), params, rules=rules)
@@ -145,9 +150,7 @@ def test_with_the_default_cap_the_slow_walkers_free_side_passes_at_full_speed():
     than v_max 0.8 m/s, keeps the paper's growth: every candidate the same as without the cap."""
     params = default_stack_params()
     st = RobotState(0.0, 0.0, 0.0)
-    xs = np.arange(-0.5, 3.0, 0.25)
-    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
-                                 ids=-np.ones(2 * len(xs), int))
+    walls = _corridor_walls()
     for v, changed in ((0.3, True), (1.2, False)):
         obs = walls.concat(Obstacles.from_lists([[0.9, -0.15]], v=[[v, 0.0]], r=0.25, ids=[5]))
         cap = imagine(st, obs, (9.0, 0.0), params, rules=PlusRules())
@@ -185,9 +188,7 @@ def test_episodes_report_switches_per_encounter_only_for_methods_with_sides():
 
 def test_the_planner_runs_a_re_judged_mode_at_its_slower_speed():
     params = default_stack_params()
-    xs = np.arange(-0.5, 3.0, 0.25)
-    walls = Obstacles.from_lists(np.r_[np.c_[xs, np.full_like(xs, 1.2)], np.c_[xs, np.full_like(xs, -1.2)]], r=0.0,
-                                 ids=-np.ones(2 * len(xs), int))
+    walls = _corridor_walls()
     st = RobotState(0.0, 0.0, 0.0)
     slowed = 0
     for y in (-0.15, 0.0, 0.15):          # a slow walker 0.9 m ahead in a 2.4 m corridor (see the test above)
