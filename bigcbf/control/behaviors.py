@@ -57,7 +57,8 @@ Both:
   headings 45 degrees apart around it, all at ``v_release_mps``, and standing still. With the rule
   ``release_sideways``, "away" from a moving obstacle (speed above ``RELEASE_MOVING_MPS``) means out of its
   path, perpendicular to its velocity (to the side the robot is already on; to the obstacle's right when
-  exactly on its path). The push alone is myopic: in the blind corner it backed the robot off a wall corner
+  exactly on its path). With the rule ``release_ahead`` an obstacle pushes by where it comes within the
+  imagination's horizon (:func:`closest_approach_c`), not by where it is now. The push alone is myopic: in the blind corner it backed the robot off a wall corner
   into the path of the person it was releasing from, and the hard CBF then chased it down a side corridor
   ahead of the person for 8 s.
 """
@@ -402,17 +403,32 @@ def release_directions(q, obs_v) -> np.ndarray:
     return np.stack([d.real, d.imag], -1)
 
 
-def release_velocity_c(pz, goal: complex, obs_z, obs_r, params: StackParams, obs_vz=None) -> np.ndarray:
+def closest_approach_c(qz: np.ndarray, obs_vz: np.ndarray, horizon_s: float) -> np.ndarray:
+    """The least distance [m] between a robot standing still and obstacles moving at constant velocity over the
+    next ``horizon_s`` [s]: q(t) = qz - obs_vz t, t in [0, horizon_s]; qz (B, M) = p - p_i (complex), obs_vz (M,)
+    complex [m/s] -> (B, M). A receding or static obstacle's is its distance now (the rule ``release_ahead``)."""
+    vz = np.asarray(obs_vz, complex)[None]
+    t = np.clip((qz.real * vz.real + qz.imag * vz.imag) / np.maximum(np.abs(vz) ** 2, _TINY), 0.0, horizon_s)
+    return np.abs(qz - vz * t)
+
+
+def release_velocity_c(pz, goal: complex, obs_z, obs_r, params: StackParams, obs_vz=None, ahead_vz=None,
+                       ahead_s: float = 0.0) -> np.ndarray:
     """The reverse-release fallback's push velocity (module docstring) on complex planar vectors: robot positions
-    pz (B,), goal p_g, obstacle positions obs_z (M,), radii (M,), velocities obs_vz (M,) or None -> (B,) [m/s]."""
+    pz (B,), goal p_g, obstacle positions obs_z (M,), radii (M,), velocities obs_vz (M,) or None -> (B,) [m/s].
+    ``ahead_vz`` (M,) with ``ahead_s`` > 0 (the rule ``release_ahead``): an obstacle pushes by how deep its closest
+    approach over the next ahead_s comes inside r_R + r_i + d0 + release_range_m (:func:`closest_approach_c`),
+    not by where it is now."""
     unc = params.uncertainty
     g = goal - pz
     back = -g / np.maximum(np.abs(g), _TINY)                       # -d_g (0 at the goal itself)
     direction = back
     if len(obs_r):
         qz = pz[:, None] - obs_z[None]
+        dist = (np.abs(qz) if ahead_vz is None or not ahead_s > 0
+                else closest_approach_c(qz, ahead_vz, float(ahead_s)))
         w = np.maximum(unc.r_robot_m + np.asarray(obs_r, float)[None] + unc.d0_m + params.release_range_m
-                       - np.abs(qz), 0.0)
+                       - dist, 0.0)
         if w.any():                     # (usually nothing is that close: skip the directions)
             push = (w * release_directions_c(qz, obs_vz)).sum(axis=1)
             npush = np.abs(push)
@@ -420,12 +436,15 @@ def release_velocity_c(pz, goal: complex, obs_z, obs_r, params: StackParams, obs
     return params.v_release_mps * direction
 
 
-def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None) -> np.ndarray:
+def release_velocity(p, goal, obs_p, obs_r, params: StackParams, obs_v=None, ahead_v=None,
+                     ahead_s: float = 0.0) -> np.ndarray:
     """The reverse-release fallback's push velocity (B, 2) [m/s] (see the module docstring): positions p (B, 2),
-    obstacles obs_p (M, 2), obs_r (M,), obs_v (M, 2) or None."""
+    obstacles obs_p (M, 2), obs_r (M,), obs_v (M, 2) or None (the directions: sideways from movers), ahead_v (M, 2)
+    or None with ahead_s (the rule ``release_ahead``: :func:`release_velocity_c`)."""
     v = release_velocity_c(_planar(np.atleast_2d(p)), complex(*np.asarray(goal, float).reshape(2)),
                            _planar(np.reshape(obs_p, (-1, 2))), obs_r, params,
-                           None if obs_v is None else _planar(obs_v))
+                           None if obs_v is None else _planar(obs_v),
+                           None if ahead_v is None else _planar(np.reshape(ahead_v, (-1, 2))), ahead_s)
     return np.stack([v.real, v.imag], -1)
 
 

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from bigcbf.control.behaviors import (MODE_INDEX, behavior_command, feedback_velocity, goal_basis, mode_indices,
-                                      obstacle_groups,
+from bigcbf.control.behaviors import (MODE_INDEX, behavior_command, closest_approach_c, feedback_velocity, goal_basis,
+                                      mode_indices, obstacle_groups,
                                       policy_velocity, relevant_obstacle, release_velocity, subgoal_error)
 from bigcbf.params import SIMULATION
 from bigcbf.params.stack import PlusRules
@@ -179,6 +179,47 @@ def test_release_from_a_moving_obstacle_is_sideways():
     v = release_velocity(np.zeros((1, 2)), np.array([5.0, 0.0]), np.array([[-0.2, 0.4]]), np.array([0.25]), P,
                          obs_v=np.array([[0.0, -1.0]]))
     np.testing.assert_allclose(v, [[0.3, 0.0]], atol=1e-12)
+
+
+def test_the_closest_approach_by_hand():
+    """q(t) = q0 - v t, t in [0, H]: a walker 2 m ahead coming head-on at 1.3 m/s passes through the robot at
+    t = 1.54 s (0 m within 2.5 s, 0.05 m short of it within 1.5 s: 2 - 1.95); one passing 0.5 m to the side is
+    closest at 0.5 m; a receding or static one is closest now."""
+    q = np.array([[-2.0 + 0j, -2.0 - 0.5j, -2.0 + 0j, 1.0 + 1.0j]])          # p - p_i for walkers at (2, 0), ...
+    v = np.array([-1.3 + 0j, -1.3 + 0j, 1.3 + 0j, 0j])
+    np.testing.assert_allclose(closest_approach_c(q, v, 2.5), [[0.0, 0.5, 2.0, math.sqrt(2)]], atol=1e-12)
+    np.testing.assert_allclose(closest_approach_c(q, v, 1.5)[0, 0], 2.0 - 1.3 * 1.5, atol=1e-12)
+
+
+def test_release_ahead_pushes_out_of_the_path_of_a_walker_still_far_away():
+    """The rule release_ahead: a walker 2 m ahead (r 0.25), coming at 1.3 m/s straight at the robot, the goal
+    beyond it. Now it is beyond r_R + r_i + d0 + release_range_m = 0.15 + 0.25 + 0.10 + 0.5 = 1.0 m: no push,
+    straight back from the goal (-x, along its path). Within 2.5 s it comes through the robot (closest 0), weight
+    1.0, and the push is sideways (release_sideways: the robot on its path line -> the walker's right, (0, +1)
+    for a walker heading -x); at 0.3 m/s. A walker going away pushes nothing either way."""
+    p0, goal = np.zeros((1, 2)), np.array([5.0, 0.0])
+    obs, r, vel = np.array([[2.0, 0.0]]), np.array([0.25]), np.array([[-1.3, 0.0]])
+    np.testing.assert_allclose(release_velocity(p0, goal, obs, r, P, obs_v=vel), [[-0.3, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(release_velocity(p0, goal, obs, r, P, obs_v=vel, ahead_v=vel, ahead_s=2.5),
+                               [[0.0, 0.3]], atol=1e-12)
+    np.testing.assert_allclose(release_velocity(p0, goal, obs, r, P, obs_v=-vel, ahead_v=-vel, ahead_s=2.5),
+                               [[-0.3, 0.0]], atol=1e-12)
+
+
+def test_release_ahead_is_a_plus_rule_off_by_default_and_reads_the_rollout_horizon():
+    from bigcbf.control.imagination import release_candidates
+    assert PlusRules().release_ahead is False
+    state = RobotState(0.0, 0.0, 0.0)
+    walker = Obstacles.from_lists([[2.0, 0.0]], v=[[-1.3, 0.0]], r=0.25, static=False, ids=[0])
+    on = PlusRules(release_ahead=True)
+    assert release_candidates(state, walker, np.array([5.0, 0.0]), P, PLUS)[0] == pytest.approx(-0.3)
+    assert release_candidates(state, walker, np.array([5.0, 0.0]), P, on)[0] == pytest.approx(0.3j)
+    # the horizon: long_horizon_s (2.5 s) with long_horizon, N dt (1.5 s) without: a walker 4 m away comes within
+    # 0.75 m of the robot in 2.5 s (weight 0.25: sideways), within 2.05 m in 1.5 s (no weight: straight back)
+    short = PlusRules(release_ahead=True, long_horizon=False)
+    far = Obstacles.from_lists([[4.0, 0.0]], v=[[-1.3, 0.0]], r=0.25, static=False, ids=[0])
+    assert release_candidates(state, far, np.array([5.0, 0.0]), P, on)[0] == pytest.approx(0.3j)     # 4 - 3.25
+    assert release_candidates(state, far, np.array([5.0, 0.0]), P, short)[0] == pytest.approx(-0.3)  # 4 - 1.95
 
 
 def test_the_in_way_band_is_a_plus_rule_and_noshared_keeps_the_paper_s():
