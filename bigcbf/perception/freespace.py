@@ -102,16 +102,23 @@ class FreeSpace:
 
     def _earlier(self, stamp: float) -> list:
         """The stored scans (all before ``stamp``) nearest to history/3, 2 history/3 and history before it, distinct,
-        within 1.5 history."""
+        within 1.5 history (of equally near ones the first stored). One pass over the stored scans."""
         hist = self.params.free_space_history_s
-        old = [s for s in self._scans if stamp - 1.5 * hist <= s[0] < stamp]
-        if not old:
-            return []
+        lo = stamp - 1.5 * hist
+        targets = (stamp - hist / 3.0, stamp - 2.0 * hist / 3.0, stamp - hist)
+        best = [None, None, None]
+        gap = [math.inf, math.inf, math.inf]
+        for s in self._scans:
+            t = s[0]
+            if lo <= t < stamp:
+                for j in range(3):
+                    d = abs(t - targets[j])
+                    if d < gap[j]:
+                        gap[j], best[j] = d, s
         picked = []
-        for lag in (hist / 3.0, 2.0 * hist / 3.0, hist):
-            best = min(old, key=lambda s: abs(s[0] - (stamp - lag)))
-            if all(best is not p for p in picked):
-                picked.append(best)
+        for s in best:
+            if s is not None and all(s is not p for p in picked):
+                picked.append(s)
         return picked
 
     def split(self, sp: ScanPoints, clusters: list, is_compact: np.ndarray,
@@ -119,7 +126,7 @@ class FreeSpace:
         """The extended clusters' runs of points in free space split out (module docstring). Returns the clusters
         and their compact flags (``geometry.compact_mask`` for a run split out; the wall's pieces stay extended)."""
         pr = self.params
-        if pr.free_space_history_s <= 0 or not clusters or bool(np.all(is_compact)):
+        if pr.free_space_history_s <= 0 or not clusters or bool(is_compact.all()):
             return clusters, is_compact
         earlier = self._earlier(stamp)
         if not earlier:

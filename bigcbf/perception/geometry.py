@@ -593,21 +593,24 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
               np.array([cl.occluded for cl in clusters], np.bool_), float(pr.fit_min_arc_rad),
               float(pr.fit_span_ratio), span, need)
     a11, a12, a22, a13, a23, a33 = A
+    covs = np.empty((m, 2, 2))                 # the fitted-radius circles' covariances, all at once (compiled)
+    _fitted_circle_covs(A, fitted, float(pr.radius_max_m), covs)
     out = []
     sx, sy = float(sensor[0]), float(sensor[1])
+    starts_l, n_l, tol_l, rms_l, r_l, sigma_l = (x.tolist() for x in (starts, n, tol, rms, r, sigma))
+    fitted_l, behind_l, span_l, need_l = fitted.tolist(), behind.tolist(), span.tolist(), need.tolist()
     for j in range(m):
-        lo, nj = int(starts[j]), int(n[j])
+        lo, nj = starts_l[j], n_l[j]
         fitted_rect = False
-        if tol[j] > 0 and rms[j] <= tol[j]:
+        if tol_l[j] > 0 and rms_l[j] <= tol_l[j]:
             rms_rect = np.inf
         else:
             _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
             fitted_rect, rms_rect = True, float(rect[3])
-        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
-            cov = _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], bool(fitted[j]),
-                                        c[j], sensor, pr)
-            out.append(Measurement(c[j].copy(), float(r[j]), True, cov, float(rms[j]), float(sigma[j]),
-                                   bool(rms[j] <= rms_rect)))
+        if rms_l[j] <= rms_rect + tol_l[j] and behind_l[j] and span_l[j] >= need_l[j]:
+            cov = (covs[j] if fitted_l[j] else
+                   _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], False, c[j], sensor, pr))
+            out.append(Measurement(c[j].copy(), r_l[j], True, cov, rms_l[j], sigma_l[j], rms_l[j] <= rms_rect))
             continue
         if not fitted_rect:
             _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
@@ -829,6 +832,15 @@ def _fitted_circle_cov(a11, a12, a22, a13, a23, a33, sigma_max, C):
     if lam > sigma_max ** 2:
         x11, x12, x22 = x11 * k, x12 * k, x22 * k
     C[0, 0], C[0, 1], C[1, 0], C[1, 1] = x11, x12, x12, x22
+
+
+@kernel
+def _fitted_circle_covs(A, fitted, sigma_max, out):
+    """:func:`_fitted_circle_cov` of every cluster j with ``fitted[j]`` into out[j] (2, 2), from the sums A (6, m)
+    (a11, a12, a22, a13, a23, a33); the others are left as they are."""
+    for j in range(A.shape[1]):
+        if fitted[j]:
+            _fitted_circle_cov(A[0, j], A[1, j], A[2, j], A[3, j], A[4, j], A[5, j], sigma_max, out[j])
 
 
 def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
