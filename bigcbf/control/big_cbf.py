@@ -144,8 +144,7 @@ class BigCbfPlusPlanner(BigCbfPlanner):
     def __init__(self, params: StackParams, rules: PlusRules | None = None):
         rules = PlusRules() if rules is None else rules
         # the rule long_horizon: the imagination (and all that reads its horizon) looks long_horizon_s ahead
-        planner_params = (dataclasses.replace(params, N=max(1, int(round(rules.long_horizon_s / params.dt_s))))
-                          if rules.long_horizon else params)
+        planner_params = dataclasses.replace(params, N=rules.rollout_steps(params)) if rules.long_horizon else params
         super().__init__(planner_params, shared=True, rules=rules)
         self.name = "big-cbf-plus"
         # ... to test the barrier against the people who move; it scores, and releases, over the stack's N steps

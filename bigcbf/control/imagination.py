@@ -337,7 +337,7 @@ def release_candidates(state: RobotState, obstacles: Obstacles, goal, params: St
     (the paper's "predefined reverse-release fallback", one choice; with the rule ``release_ahead`` from where the
     movers come within the imagination's horizon, long_horizon_s or N dt); with the rule ``release_fan`` also the eight
     ``RELEASE_HEADINGS`` around straight back from the goal at ``v_release_mps``, and 0 (standing still)."""
-    ahead_s = (rules.long_horizon_s if rules.long_horizon else params.N * params.dt_s) if rules.release_ahead else 0.0
+    ahead_s = rules.rollout_steps(params) * params.dt_s if rules.release_ahead else 0.0
     push = release_velocity(state.p[None], goal, obstacles.p, obstacles.r, params,
                             obstacles.v if rules.release_sideways else None,
                             obstacles.v if rules.release_ahead else None, ahead_s)[0]

@@ -411,6 +411,11 @@ class PlusRules:
             if not math.isfinite(getattr(self, k)):
                 raise FieldError(k, "must be finite")
 
+    def rollout_steps(self, params: "StackParams") -> int:
+        """The imagination's rollout length in steps of params.dt_s: long_horizon_s with the rule ``long_horizon``,
+        else the stack's N (Table I)."""
+        return max(1, int(round(self.long_horizon_s / params.dt_s))) if self.long_horizon else params.N
+
     @property
     def switches(self) -> dict[str, bool]:
         """The named switches and their states."""

@@ -592,7 +592,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     _arc_need(np.arctan2(ay, ax), n, np.arccos(cos_arg), np.arcsin(sin_arg),
               np.array([cl.occluded for cl in clusters], np.bool_), float(pr.fit_min_arc_rad),
               float(pr.fit_span_ratio), span, need)
-    a11, a12, a22, a13, a23, a33 = A
+    a11, a12, a22 = A[:3]
     covs = np.empty((m, 2, 2))                 # the fitted-radius circles' covariances, all at once (compiled)
     _fitted_circle_covs(A, fitted, float(pr.radius_max_m), covs)
     out = []
@@ -608,8 +608,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
             _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
             fitted_rect, rms_rect = True, float(rect[3])
         if rms_l[j] <= rms_rect + tol_l[j] and behind_l[j] and span_l[j] >= need_l[j]:
-            cov = (covs[j] if fitted_l[j] else
-                   _circle_cov_from_sums(a11[j], a12[j], a22[j], a13[j], a23[j], a33[j], False, c[j], sensor, pr))
+            cov = covs[j].copy() if fitted_l[j] else _clamped_circle_cov(a11[j], a12[j], a22[j], c[j], sensor, pr)
             out.append(Measurement(c[j].copy(), r_l[j], True, cov, rms_l[j], sigma_l[j], rms_l[j] <= rms_rect))
             continue
         if not fitted_rect:
@@ -815,7 +814,7 @@ def _arc_need(ang, n, acos, asin, occluded, min_arc, span_ratio, span, need):
 
 @kernel
 def _fitted_circle_cov(a11, a12, a22, a13, a23, a33, sigma_max, C):
-    """:func:`_circle_cov_from_sums` with the radius fitted, into C (2, 2): the centre block of the inverse of
+    """The covariance of a fitted circle's centre, into C (2, 2): the centre block of the inverse of
     [[a11, a12, a13], [a12, a22, a23], [a13, a23, a33]] (cofactors / det; cap^2 I when not positive definite or
     not finite), then :func:`_cap_std`; numpy's scalar arithmetic in its order."""
     cap = sigma_max ** 2
@@ -843,22 +842,17 @@ def _fitted_circle_covs(A, fitted, sigma_max, out):
             _fitted_circle_cov(A[0, j], A[1, j], A[2, j], A[3, j], A[4, j], A[5, j], sigma_max, out[j])
 
 
-def _circle_cov_from_sums(a11, a12, a22, a13, a23, a33, fit_radius, center, sensor, params) -> np.ndarray:
-    """circle_fit_covariance from the entries of J^T W J (closed-form inverses)."""
+def _clamped_circle_cov(a11, a12, a22, center, sensor, params) -> np.ndarray:
+    """circle_fit_covariance of a circle whose radius was clamped (not fitted), from the entries of J^T W J
+    (closed-form inverse); the fitted ones are :func:`_fitted_circle_covs`."""
     cap = params.radius_max_m ** 2
-    if fit_radius:
-        C = np.empty((2, 2))
-        _fitted_circle_cov(float(a11), float(a12), float(a22), float(a13), float(a23), float(a33),
-                           float(params.radius_max_m), C)
-        return C
-    else:
-        det = a11 * a22 - a12 * a12
-        if not det > 0:
-            return cap * np.eye(2)
-        C = np.array([[a22, -a12], [-a12, a11]]) / det
-        ray = center - sensor
-        ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
-        C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
+    det = a11 * a22 - a12 * a12
+    if not det > 0:
+        return cap * np.eye(2)
+    C = np.array([[a22, -a12], [-a12, a11]]) / det
+    ray = center - sensor
+    ray = ray / max(float(np.linalg.norm(ray)), 1e-12)
+    C = C + (params.radius_max_m - params.radius_min_m) ** 2 / 12.0 * np.outer(ray, ray)
     if not np.all(np.isfinite(C)):
         return cap * np.eye(2)
     return _cap_std(C, params.radius_max_m)
