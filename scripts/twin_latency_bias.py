@@ -46,7 +46,7 @@ def respond(t_cmd, u_cmd, jitter, residual, accel, rng, h=0.001):
     y, out = np.zeros(3), np.zeros((len(tg), 3))
     alpha = 1 - np.exp(-h / WHEEL_LAG_S)
     for i in range(len(tg)):
-        y = y + (limiter.update(tg[i], target[k[i]] if k[i] >= 0 else np.zeros(3)) - y) * alpha
+        y = y + (limiter.update(tg[i], target[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * alpha
         out[i] = y
     ts = np.arange(0.02, tg[-1], 0.02)
     c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h

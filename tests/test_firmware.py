@@ -102,6 +102,24 @@ def test_wheel_limiter_acceleration_by_hand():
     np.testing.assert_allclose(lim.update(0.01, [0.5, 0.0, 1.0]), np.array([0.5, 0.0, 1.0]) * 0.02 / 0.6645)
 
 
+def test_wheel_limiter_block_means_do_not_depend_on_where_a_command_falls_in_a_block():
+    """A step to vx = 0.5 m/s at 2 m/s^2 (rim) from rest, arriving at 0.1 s + delta, with updates on a 10 ms block grid
+    cut at the arrival (as SimWorld.step cuts its blocks): the held block means integrate to the continuous ramp's
+    integral, worked out by hand: the ramp takes tau = 0.25 s, so over [0, 1] s the output's integral is
+    0.5 (1 - 0.1 - delta - tau / 2) m; the old limiter (the budget of the time before the command, applied to it)
+    read up to a block early."""
+    from bigcbf.sim.firmware import WheelLimiter
+    for delta in (0.0, 0.002, 0.005, 0.008):
+        t_a = 0.1 + delta
+        grid = np.unique(np.round(np.r_[np.arange(0.0, 1.0, 0.01), t_a], 9))
+        lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=2.0), 0.1645)
+        area = 0.0
+        for t0, t1 in zip(grid, np.r_[grid[1:], 1.0]):
+            target = [0.5, 0.0, 0.0] if t0 >= t_a - 1e-12 else [0.0, 0.0, 0.0]
+            area += lim.update(t0, target, t1 - t0)[0] * (t1 - t0)
+        assert area == pytest.approx(0.5 * (1.0 - t_a - 0.25 / 2), abs=1e-12), delta
+
+
 def test_default_profile_has_no_limiter_and_limits_show_in_the_physics():
     assert ImperfectionLayer(RobotProfile(), np.random.default_rng(0)).limiter is None
     world = SimWorld(SceneSpec(), profile=RobotProfile(wheel_speed_max_mps=0.3))

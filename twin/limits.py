@@ -41,16 +41,18 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    with a 45 ms dead time for vx, whose own best is 85 ms and 13 ms). An acceleration limit is reported when it
    lowers that error by ``accel_gain`` against none. The yaw lever is then chosen among
    those the static part leaves plausible (within 25 noise variances of its best), by the transients: how fast a
-   combined step ramps depends on it. Each axis's delay to half a step (L + T ln 2: dead time and lag trade off,
-   their sum is what a log pins down) gets a 5-95 % interval by bootstrap over the calibration blocks (the error
-   of each candidate summed per block).
+   combined step ramps depends on it. Finally each axis's dead time and lag are searched again near their values
+   on a 2.5 ms grid (:func:`refine_dynamic`, dead time every 1.25 ms): on the 10 ms grid an acceleration-limited
+   ramp can only start on a grid point, so a limited response's dead times came out in 10 ms steps. Each axis's
+   delay to half a step (L + T ln 2: dead time and lag trade off, their sum is what a log pins down) gets a 5-95 %
+   interval by bootstrap over the calibration blocks (the error of each candidate summed per block).
 
 The dead time L is the command-to-wheel latency (what the robot profile's latency_s is in the simulator); T and the
 acceleration limit are the response after it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -76,6 +78,9 @@ class LimitOptions:
     accel_max: float = 40.0
     accel_gain: float = 0.03            # a limit is reported when it lowers the error by this fraction [-]
     bootstrap: int = 400
+    fine_step_s: float = 0.0025         # grid of the final per-axis search (refine_dynamic; = step_s: none) [s]
+    fine_dead_s: float = 0.00125        # its dead-time step [s]
+    fine_span_s: float = 0.01           # ... within this of the coarse search's [s]
 
 
 def rim_matrix(lever_m: float) -> np.ndarray:
@@ -527,42 +532,9 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     # 4. dead time and lag per axis (the others at the common ones), bootstrap over blocks: the axes of one base
     # need not respond alike (a Mecanum base's yaw, turned by its rollers' friction, follows more slowly than its
     # translation), and a lag shared with a slower axis would call that axis settled while it still moves
-    rng = np.random.default_rng(seed)
     offs = np.arange(-0.05, 0.0501, 0.005)
     lag_grid = np.unique(np.r_[lags, T0])
-    rows, lag_rows, which = [], [], []
-    for j in np.flatnonzero(axes):
-        for o in offs:
-            for T in lag_grid:
-                L = np.full(3, L0)
-                L[j] = max(L0 + o, 0.0)
-                Tj = np.full(3, T0)
-                Tj[j] = T
-                rows.append(L)
-                lag_rows.append(Tj)
-                which.append(j)
-    lat = np.full(3, np.nan)
-    ci = np.full((3, 2), np.nan)
-    lag_axes = np.full(3, T0)
-    if rows:
-        c4 = Candidates(np.array(rows), np.array(lag_rows), np.full(len(rows), a0))
-        err4 = prob.simulate(c4)
-        which = np.array(which)
-        W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
-        for j in np.flatnonzero(axes):
-            sel = np.flatnonzero(which == j)
-            e = err4[sel][:, :, j]                      # (K, B): axis j's own error per block
-            best = sel[np.argmin(e.sum(axis=1))]
-            lat[j], lag_axes[j] = float(c4.L[best, j]), float(c4.T[best, j])
-            # the interval of the half-step delay (dead time + T ln 2: what the log pins down; dead time and lag
-            # trade off), given as the dead time at this axis's lag
-            picks = sel[np.argmin(W @ e.T, axis=1)]
-            half = c4.L[picks, j] + c4.T[picks, j] * np.log(2)
-            # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
-            # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
-            # moves out by half a step (else a 90 % interval reads [0.050, 0.050])
-            step = float(offs[1] - offs[0])
-            ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
+    lat, lag_axes, ci = _axis_search(prob, np.full(3, L0), np.full(3, T0), a0, offs, [lag_grid] * 3, opt, seed)
     notes = []
     for j in np.flatnonzero(axes):
         if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
@@ -573,6 +545,67 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     floor = float(opt.accel_max) if not np.isfinite(a0) else float(a0)
     return DynamicFit(lat, ci, T0, None if not np.isfinite(a0) else a0, floor, best_cost, cost_none, notes, lever,
                       lag_axes)
+
+
+def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a: float, offs: np.ndarray,
+                 lag_sets: list, opt: LimitOptions, seed: int = 0):
+    """Each identified axis's dead time (L_base[j] + offs) and lag (lag_sets[j]), the other axes at their base
+    values, by that axis's own error; and the 5-95 % bootstrap interval over the blocks of its half-step delay
+    (dead time + T ln 2: what the log pins down, dead time and lag trade off), given as the dead time at the
+    chosen lag. Returns (dead times (3,), lags (3,), intervals (3, 2)); nan on the other axes."""
+    axes = prob.axes
+    rows, lag_rows, which = [], [], []
+    for j in np.flatnonzero(axes):
+        for o in offs:
+            for T in lag_sets[j]:
+                L = np.array(L_base, float)
+                L[j] = max(L_base[j] + o, 0.0)
+                Tj = np.array(T_base, float)
+                Tj[j] = T
+                rows.append(L)
+                lag_rows.append(Tj)
+                which.append(j)
+    lat = np.full(3, np.nan)
+    ci = np.full((3, 2), np.nan)
+    lag_axes = np.array(T_base, float)
+    if not rows:
+        return lat, lag_axes, ci
+    rng = np.random.default_rng(seed)
+    c = Candidates(np.array(rows), np.array(lag_rows), np.full(len(rows), a))
+    err = prob.simulate(c)
+    which = np.array(which)
+    W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
+    step = float(np.min(np.diff(offs))) if len(offs) > 1 else 0.0
+    for j in np.flatnonzero(axes):
+        sel = np.flatnonzero(which == j)
+        e = err[sel][:, :, j]                      # (K, B): axis j's own error per block
+        best = sel[np.argmin(e.sum(axis=1))]
+        lat[j], lag_axes[j] = float(c.L[best, j]), float(c.T[best, j])
+        picks = sel[np.argmin(W @ e.T, axis=1)]
+        half = c.L[picks, j] + c.T[picks, j] * np.log(2)
+        # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
+        # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
+        # moves out by half a step (else a 90 % interval reads [0.050, 0.050])
+        ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
+    return lat, lag_axes, ci
+
+
+def refine_dynamic(prob: DynamicProblem, dyn: DynamicFit, opt: LimitOptions = LimitOptions(),
+                   seed: int = 0) -> DynamicFit:
+    """Each axis's dead time and lag again, on ``prob``'s finer grid (``LimitOptions.fine_step_s``) and near the
+    values ``dyn`` has: dead time within +-``fine_span_s`` every ``fine_dead_s``, lags around its own. On the
+    10 ms grid of the search an acceleration-limited ramp can only start on a grid point (the box average of a
+    command that steps inside a step asks the limiter for its whole budget), so the dead times of a limited
+    response come out in 10 ms steps; the intervals come from this search."""
+    if not np.isfinite(dyn.latency_s).any():
+        return dyn
+    offs = np.arange(-opt.fine_span_s, opt.fine_span_s + 1e-9, opt.fine_dead_s)
+    L = np.where(np.isfinite(dyn.latency_s), dyn.latency_s, np.nanmedian(dyn.latency_s))
+    T = dyn.axis_lags_s
+    lag_sets = [np.unique(np.clip(T[j] + np.arange(-0.0075, 0.00751, 0.0025), 0.0, None)) for j in range(3)]
+    a = np.inf if dyn.accel_max is None else dyn.accel_max
+    lat, lags, ci = _axis_search(prob, L, T, a, offs, lag_sets, opt, seed)
+    return replace(dyn, latency_s=lat, latency_ci_s=ci, lags_s=lags)
 
 
 @dataclass
@@ -637,7 +670,8 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
     (``cal``; at first those of ``settled_init``, with the commands ``u_init``), the dynamic part on every sample of
     the calibration blocks; then, up to ``rounds`` times until the static part stops changing, the static part again
     on the samples the model says have settled (and, where the model saturates, whose measured twist has stopped
-    changing: :func:`steady_samples`), with the commands delayed by the dead times, and the dynamic part refined."""
+    changing: :func:`steady_samples`), with the commands delayed by the dead times, and the dynamic part refined;
+    last, each axis's dead time and lag on the finer grid (:func:`refine_dynamic`)."""
     axes = np.asarray(axes, bool)
     steady_meas = steady_samples(t, v, axes)
     st = fit_static(u_init[cal & settled_init], v[cal & settled_init], axes, opt)
@@ -664,4 +698,9 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
         st = new
         if same and r >= 1:
             break
+    if opt.fine_step_s < opt.step_s:
+        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.fine_step_s, avg_s)
+        dyn = refine_dynamic(prob, dyn, opt)
+        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.fine_step_s, avg_s)
+        settled = settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
     return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored)

@@ -69,7 +69,6 @@ COARSE_HALF = 0.7
 NUISANCE_HALF = 0.7
 #: the damping's coordinate unit, as a fraction of the nominal kv (parameters())
 DAMPING_UNIT = 0.1
-FIRMWARE_TICK_S = 0.01          # the wheel limiter runs every firmware tick, as in SimWorld.step
 
 
 @dataclass(frozen=True)
@@ -224,17 +223,15 @@ def wheel_targets(cmd_t: np.ndarray, cmd_u: np.ndarray, front: RobotProfile, kin
     imp = ImperfectionLayer(quiet, np.random.default_rng(0), lever_m=kin.half_wheelbase_m + kin.half_track_m)
     rel = np.asarray(cmd_t, float) - float(cmd_t[0])
     out = np.zeros((len(times), 4))
-    k, last_tick, target = 0, -np.inf, np.zeros(3)
+    k = 0
+    hold = float(times[1] - times[0]) if len(times) > 1 else 0.0
     for i, t in enumerate(times):
         while k < len(rel) and rel[k] <= t + 1e-12:
             imp.submit(float(rel[k]), cmd_u[k])
             k += 1
         twist = imp.at(float(t))
-        if imp.limiter is not None:
-            if t - last_tick >= FIRMWARE_TICK_S - 1e-9:
-                target, last_tick = imp.limiter.update(float(t), twist), t
-        else:
-            target = twist
+        # the limiter's mean over each control interval, as SimWorld.step holds its mean over each physics block
+        target = imp.limiter.update(float(t), twist, hold) if imp.limiter is not None else twist
         out[i] = kin.inverse(target)
     return out
 

@@ -109,8 +109,14 @@ class WheelLimiter:
 
     - saturation: a target twist whose fastest wheel rim speed max|R v| exceeds the limit is scaled by
       limit / max|R v| (all wheels together: the direction of motion is kept, the axes are coupled);
-    - acceleration: each update moves the output twist toward the (saturated) target by a step whose largest
-      wheel change max|R dv| is at most ``wheel_accel_max_mps2`` times the time since the previous update.
+    - acceleration: the output twist moves toward the (saturated) target in a straight line, continuously in time,
+      its largest wheel change max|R dv| growing at ``wheel_accel_max_mps2``. :meth:`update` ``(t, target,
+      hold_s)`` first moves it over the time since the previous call toward the target in force then, and returns
+      its mean over the coming ``hold_s`` toward the new one: the physics holds one value per block, and the
+      block's mean keeps the wheels' response independent of where in a block a command arrives. (Moving toward
+      the new target by the budget of the time *before* it arrived, as this limiter once did, started every ramp
+      up to a block early when a command met a block's start, and less when it fell inside one: a 0-10 ms timing
+      error that the twin read as latency.)
     """
 
     def __init__(self, profile: RobotProfile, default_lever_m: float):
@@ -119,6 +125,7 @@ class WheelLimiter:
         self.v_max = profile.wheel_speed_max_mps
         self.a_max = profile.wheel_accel_max_mps2
         self.out = np.zeros(3)
+        self._goal = np.zeros(3)
         self._t = None
 
     def saturate(self, twist) -> np.ndarray:
@@ -128,19 +135,29 @@ class WheelLimiter:
         peak = float(np.max(np.abs(self.R @ v)))
         return v * (self.v_max / peak) if peak > self.v_max else v
 
-    def update(self, t: float, target) -> np.ndarray:
-        """The limited twist at time t for the executed (pre-limit) twist ``target``; call with increasing t."""
+    def _ramp(self, goal: np.ndarray) -> tuple[np.ndarray, float]:
+        """The step from the output to ``goal`` and how long the limit takes over it [s]."""
+        step = goal - self.out
+        return step, float(np.max(np.abs(self.R @ step))) / self.a_max
+
+    def update(self, t: float, target, hold_s: float = 0.0) -> np.ndarray:
+        """The limited twist to hold from t for ``hold_s`` (its mean over that span; 0: its value at t) for the
+        executed (pre-limit) twist ``target``, in force from t on; call with increasing t."""
         goal = self.saturate(target)
         if self.a_max is None:
             self.out = goal
-        else:                                   # the robot starts at rest: the first update moves nothing
-            last = t if self._t is None else self._t
-            step = goal - self.out
-            peak = float(np.max(np.abs(self.R @ step)))
-            room = self.a_max * max(t - last, 0.0)
-            self.out = self.out + (step * (room / peak) if peak > room else step)
-        self._t = t
-        return self.out
+            return goal
+        if self._t is not None:                 # the robot starts at rest: the first call moves nothing
+            step, tau = self._ramp(self._goal)
+            dt = max(t - self._t, 0.0)
+            self.out = self._goal.copy() if dt >= tau else self.out + step * (dt / tau)
+        self._goal, self._t = goal, t
+        step, tau = self._ramp(goal)
+        if hold_s <= 0.0 or tau <= 0.0:
+            return self.out.copy()
+        # the mean over [0, H] of min(1, s / tau): the ramp's part, then the goal held
+        frac = hold_s / (2.0 * tau) if hold_s <= tau else 1.0 - tau / (2.0 * hold_s)
+        return self.out + step * frac
 
 
 class WheelOdometry:

@@ -153,18 +153,18 @@ class SimWorld:
                 hook(self)
             t = d.time
             twist = imp.at(t)
-            if imp.limiter is not None:                # the firmware's wheel limits (robot profile)
-                lim = imp.limiter.update(t, twist)
+            nb = min(n, self.BLOCK_STEPS)
+            nxt = imp.next_apply_time()
+            if nxt is not None:                        # stop the block where the next command takes effect
+                nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
+            if imp.limiter is not None:                # the firmware's wheel limits (robot profile): their mean
+                lim = imp.limiter.update(t, twist, nb * dt)         # over the block
                 if self._ctrl_for is None or not np.array_equal(lim, self._ctrl_for):
                     self._ctrl_for, self._ctrl = lim.copy(), self.kin.inverse(lim)
                     d.ctrl[self._act] = self._ctrl
             elif twist is not self._ctrl_for:          # wheel targets change only with the executed twist
                 self._ctrl_for, self._ctrl = twist, self.kin.inverse(twist)
                 d.ctrl[self._act] = self._ctrl
-            nb = min(n, self.BLOCK_STEPS)
-            nxt = imp.next_apply_time()
-            if nxt is not None:                        # stop the block where the next command takes effect
-                nb = max(1, min(nb, math.ceil((nxt - t) / dt - 1e-9)))
             w0, g0 = d.qvel[self._wheel_dof], float(d.sensordata[self._imu_gyro + 2])     # (an index copy)
             if self.block_log is not None:
                 self.block_log.add(m, d, nb)
