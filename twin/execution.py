@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lstsq
 
+from .signals import expanded_levels
+
 AXES = ("vx", "vy", "wz")
 
 
@@ -176,7 +178,8 @@ def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray
 
     The samples (times t, aligned commands u, twists v; those the fit used) are cut into consecutive time blocks of
     ``gain_block_s``; ``gain_bootstrap`` times, as many blocks as there are are drawn with replacement and A is
-    refitted by :func:`least_squares`; the percentile interval of each diagonal entry is shifted by the reported
+    refitted by :func:`least_squares`; the percentile interval of each diagonal entry (expanded for the number of
+    blocks, :func:`twin.signals.expanded_levels`) is shifted by the reported
     A minus the fit on all the samples (the reported A may come from a slightly different sample set, e.g. below a
     wheel limit's kink). Fewer than 6 blocks: no interval (nan)."""
     t, u, v = np.asarray(t, float), np.asarray(u, float), np.asarray(v, float)
@@ -196,8 +199,7 @@ def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray
         ii = np.concatenate([groups[k] for k in rng.integers(0, len(groups), len(groups))])
         Ab, _ = least_squares(u[ii], v[ii], axes)
         diag[b] = np.diag(Ab)
-    a = (1.0 - opt.gain_level) / 2
-    q = np.quantile(diag, [a, 1.0 - a], axis=0).T                     # (3, 2)
+    q = np.quantile(diag, expanded_levels(opt.gain_level, len(groups)), axis=0).T      # (3, 2)
     shift = np.diag(np.asarray(A, float)) - np.diag(A_all)
     out[axes] = q[axes] + shift[axes, None]
     return out

@@ -57,6 +57,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .execution import least_squares
+from .signals import expanded_levels
 
 AXES = ("vx", "vy", "wz")
 
@@ -585,8 +586,10 @@ def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a
         half = c.L[picks, j] + c.T[picks, j] * np.log(2)
         # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
         # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
-        # moves out by half a step (else a 90 % interval reads [0.050, 0.050])
-        ci[j] = np.quantile(half, [0.05, 0.95]) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
+        # moves out by half a step (else a 90 % interval reads [0.050, 0.050]); the quantiles are those of a 90 %
+        # interval expanded for the few blocks (signals.expanded_levels: 2.1-97.9 % at 8 blocks)
+        q = expanded_levels(0.90, prob.nblocks)
+        ci[j] = np.quantile(half, q) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
     return lat, lag_axes, ci
 
 

@@ -44,3 +44,17 @@ def quantile_upper(x, q: float) -> float:
         return float("nan")
     k = int(np.ceil(q * len(x))) - 1
     return float(x[min(max(k, 0), len(x) - 1)])
+
+
+def expanded_levels(level: float, n_blocks: int) -> tuple[float, float]:
+    """The bootstrap quantiles of a ``level`` percentile interval over ``n_blocks`` resampled blocks, expanded for the
+    few blocks (Hesterberg's expanded percentile interval, "What teachers should know about the bootstrap", The
+    American Statistician 69 (2015)): a percentile interval from n blocks is too narrow by sqrt((n - 1) / n) and by
+    using the normal's quantile where the t's with n - 1 degrees of freedom holds, so its tails are taken at
+    Phi(-z') with z' = sqrt(n / (n - 1)) t_{n-1, (1 + level) / 2}. 8 blocks at 90 %: 2.14 % and 97.86 % (the
+    plain 5 % and 95 % would cover about 83 %)."""
+    from scipy.stats import norm, t as student
+    n = max(int(n_blocks), 2)
+    z = np.sqrt(n / (n - 1.0)) * student.ppf(0.5 + level / 2.0, n - 1)
+    a = float(norm.cdf(-z))
+    return a, 1.0 - a

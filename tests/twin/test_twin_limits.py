@@ -125,3 +125,53 @@ def test_static_fit_on_simulated_settled_samples_near_the_kink():
         assert 0.14 <= st.lever_m <= 0.19, i            # the simulated base's lever is 0.1645 m
         # the fixture exercises the failure: the linear fit across the limit reads every gain low
         assert np.all(np.diag(st.A_linear) < np.asarray(gains) * 0.97), i
+
+
+def test_expanded_percentile_levels_by_hand():
+    """Hesterberg's expanded percentile interval: z' = sqrt(n / (n - 1)) t_{n-1, 0.95} at 90 %; by hand for 8 blocks
+    t_{7, 0.95} = 1.8946, sqrt(8 / 7) = 1.0690, z' = 2.0254, Phi(-2.0254) = 0.02141; many blocks: the plain 5 %."""
+    from twin.signals import expanded_levels
+    lo, hi = expanded_levels(0.90, 8)
+    assert lo == pytest.approx(0.02141, abs=2e-5) and hi == pytest.approx(1 - 0.02141, abs=2e-5)
+    assert expanded_levels(0.90, 10 ** 6)[0] == pytest.approx(0.05, abs=1e-5)
+    assert expanded_levels(0.90, 40)[0] == pytest.approx(0.0440, abs=2e-4)
+
+
+def _limited_drive(dead_s: float, accel: float = 1.5, lag_s: float = 0.015, h: float = 0.001):
+    """A synthetic robot behind the simulated firmware's acceleration limit (bigcbf.sim.firmware.WheelLimiter,
+    continuous in time) with a first-order wheel lag and 20-ms averaged odometry at 50 Hz, driven by 40 s of the
+    calibration program; no noise."""
+    from bigcbf.params.robot import RobotProfile
+    from bigcbf.sim.firmware import WheelLimiter
+    from twin.drive import calibration_program
+    t_cmd, u_cmd = calibration_program(40.0, seed=1)
+    tg = np.arange(0.0, t_cmd[-1] + 0.5, h)
+    k = np.searchsorted(t_cmd + dead_s, tg + 1e-12, side="right") - 1
+    lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=accel), 0.1645)
+    a = 1 - np.exp(-h / lag_s)
+    y, out = np.zeros(3), np.zeros((len(tg), 3))
+    for i in range(len(tg)):
+        y = y + (lim.update(tg[i], u_cmd[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * a
+        out[i] = y
+    ts = np.arange(0.5, tg[-1] - 0.1, 0.02)
+    c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h
+    return t_cmd, u_cmd, ts, (c[np.searchsorted(tg, ts - 1e-9)] - c[np.searchsorted(tg, ts - 0.02 - 1e-9)]) / 0.02
+
+
+def test_refined_dead_time_follows_a_latency_between_grid_points():
+    """Behind an acceleration limit the 10 ms search grid lets a ramp start only on a grid point: latencies of 100 and
+    106 ms read 10 ms apart on two axes of three (measured before refine_dynamic). The search repeated on the
+    2.5 ms grid reads each axis's half-step delay 6 ms apart, within 2 ms."""
+    from twin.limits import DynamicProblem, StaticFit, fit_dynamic, refine_dynamic
+    st = StaticFit(np.eye(3), np.zeros(3), None, 0.1645, (0.1645, 0.1645), True, 0.0, 0, 0.0, 0.0, np.eye(3),
+                   np.zeros(3))
+    halves = []
+    for dead in (0.100, 0.106):
+        t_cmd, u_cmd, ts, v = _limited_drive(dead)
+        block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
+        args = (t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), st)
+        dyn = fit_dynamic(DynamicProblem(*args, 0.01, 0.02))
+        fine = refine_dynamic(DynamicProblem(*args, 0.0025, 0.02), dyn)
+        assert fine.accel_max == pytest.approx(1.5, rel=0.1)
+        halves.append(fine.latency_s + fine.axis_lags_s * np.log(2))
+    np.testing.assert_allclose(halves[1] - halves[0], 0.006, atol=0.002)
