@@ -7,8 +7,8 @@ firmware's wheel limits (bigcbf.sim.firmware.WheelLimiter), first-order wheels w
 odometry at 50 Hz), driven by the
 calibration drive's commands (twin.drive.segments, 80 s at 20 Hz) and, like the simulator's firmware
 (bigcbf.sim.firmware), with the latency jitter on each command's delay and the execution residual added to the
-target before the wheel limits. twin.limits.fit_dynamic is given the true static part, so only the dynamics are
-estimated. Prints each case's half-step latency (dead time + lag ln 2) per axis and its median over the axes
+target before the wheel limits. twin.limits.fit_dynamic and refine_dynamic (as fit_model runs them) are given the
+true static part, so only the dynamics are estimated. Prints each case's half-step latency (dead time + lag ln 2) per axis and its median over the axes
 against the noiseless case: a jitter J should add J/2; a residual nothing.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 from bigcbf.params.robot import RobotProfile
 from bigcbf.sim.firmware import WheelLimiter
 from twin.drive import DriveLimits, segments
-from twin.limits import DynamicProblem, StaticFit, fit_dynamic
+from twin.limits import DynamicProblem, StaticFit, fit_dynamic, refine_dynamic
 
 LATENCY_S, V_MAX, LEVER_M, WHEEL_LAG_S = 0.1, 0.6, 0.1645, 0.015
 
@@ -67,9 +67,9 @@ def main() -> None:
         for name, (jitter, residual) in cases.items():
             ts, v = respond(t_cmd, u_cmd, jitter, np.full(3, residual), args.accel, np.random.default_rng(seed))
             block = np.minimum((ts / ts[-1] * 10).astype(int), 9)
-            prob = DynamicProblem(t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), static,
-                                  0.01, 0.02)
-            dyn = fit_dynamic(prob)
+            fit_args = (t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), static)
+            dyn = fit_dynamic(DynamicProblem(*fit_args, 0.01, 0.02))
+            dyn = refine_dynamic(DynamicProblem(*fit_args, 0.0025, 0.02), dyn)      # as twin.limits.fit_model ends
             half = (dyn.latency_s + dyn.axis_lags_s * np.log(2)) * 1e3
             med = float(np.median(half))
             base = med if base is None else base

@@ -49,9 +49,9 @@ from its own stream (``bigcbf.sim.world``), so that e.g. LiDAR noise does not ch
 Wheel limits, as a base's firmware has them (``bigcbf.sim.firmware.WheelLimiter``): the wheel rim speeds of the
 twist, ``vx -+ vy -+ k wz`` for the four wheels (k = ``wheel_yaw_lever_m``, by default half wheelbase + half
 track of the model), are scaled down *together* when the fastest exceeds ``wheel_speed_max_mps`` (the direction
-of motion is kept; the axes are coupled: a turn takes speed from a straight run), and the change of the wheel
-speeds per firmware tick (10 ms) is scaled down together so that no wheel accelerates faster than
-``wheel_accel_max_mps2``. ``wheel_yaw_lever_m`` lets the model imitate another base's geometry (a differential
+of motion is kept; the axes are coupled: a turn takes speed from a straight run), and the twist ramps toward its
+target in a straight line, continuously in time, so that no wheel accelerates faster than ``wheel_accel_max_mps2``
+(each physics block holds the ramp's mean over it). ``wheel_yaw_lever_m`` lets the model imitate another base's geometry (a differential
 drive's half track, as ``bigcbf replay`` identifies it).
 
 Documented ranges (the calibration drive, ``bigcbf record calibration``, is checked on them): latency_s 0-0.3,
