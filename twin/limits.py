@@ -677,6 +677,13 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
     last, each axis's dead time and lag on the finer grid (:func:`refine_dynamic`)."""
     axes = np.asarray(axes, bool)
     steady_meas = steady_samples(t, v, axes)
+
+    def predict(st: StaticFit, dyn: DynamicFit, h: float):
+        """The model's prediction, target, delayed commands and scored samples, and the samples it calls settled:
+        where it has its target saturated, the measurement must agree that the robot stopped changing."""
+        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, h, avg_s)
+        return y, s, u, scored, settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
+
     st = fit_static(u_init[cal & settled_init], v[cal & settled_init], axes, opt)
     dyn = None
     for r in range(rounds + 1):
@@ -688,9 +695,7 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
             dyn = fit_dynamic(prob, opt, start=(float(np.nanmedian(dyn.latency_s)), dyn.lag_s, a))
         if dyn.lever_m is not None:
             st = st.at_lever(dyn.lever_m)
-        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.step_s, avg_s)
-        # where the model has its target saturated, the measurement must agree that the robot stopped changing
-        settled = settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
+        y, s, u, scored, settled = predict(st, dyn, opt.step_s)
         use = cal & settled
         if r == rounds or use.sum() < min_settled:
             break
@@ -704,6 +709,5 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
     if opt.fine_step_s < opt.step_s:
         prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.fine_step_s, avg_s)
         dyn = refine_dynamic(prob, dyn, opt)
-        y, s, u, scored = _predict(t_cmd, u_cmd, t, v, axes, st, dyn, opt.fine_step_s, avg_s)
-        settled = settled_by_model(y, s, axes) & scored & (steady_meas | ~st.saturated(u))
+        y, s, u, scored, settled = predict(st, dyn, opt.fine_step_s)
     return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored)
