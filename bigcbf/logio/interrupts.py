@@ -13,10 +13,18 @@ writer updates several structures per message). So:
 
 Only the main thread's sections count (signal handlers run in the main thread); writes from other threads (a live
 stream) are not delayed.
+
+Compiled kernels: Python runs a signal's handler at the next bytecode of the main thread. While a numba kernel runs,
+that bytecode is usually inside numba's own helpers that the compiled code calls back (``_numba_unpickle``, called
+on every return that boxes an array), and an exception raised there leaves the kernel as ``SystemError: ...
+returned a result with an exception set``: no KeyboardInterrupt, so no partial log, a traceback instead of
+"interrupted". A signal that lands in numba's code is delivered again a few milliseconds later (never lost: once
+the handlers are restored, the default one takes it).
 """
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -54,9 +62,27 @@ class _Critical:
 critical = _Critical()
 
 
+#: a signal that lands in numba's code is sent again after this long (module docstring)
+RETRY_S = 0.005
+
+
+def _in_numba(frame) -> bool:
+    """Whether ``frame`` (the one a signal interrupted) is numba's code: a helper that a compiled kernel calls back,
+    where an exception turns into SystemError."""
+    if frame is None:
+        return False
+    name = frame.f_globals.get("__name__", "")
+    return name == "numba" or name.startswith("numba.")
+
+
 def _handler(signum, frame) -> None:
     if critical.depth > 0:
         critical.pending = signum          # raised when the write ends
+        return
+    if _in_numba(frame):                   # raised a few ms later, outside the kernel
+        t = threading.Timer(RETRY_S, os.kill, (os.getpid(), signum))
+        t.daemon = True
+        t.start()
         return
     raise KeyboardInterrupt(signal.Signals(signum).name)
 

@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
@@ -124,6 +125,38 @@ def test_a_signal_inside_a_log_write_waits_for_its_end():
             os.kill(os.getpid(), signal.SIGTERM)
             time.sleep(1.0)
     assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+
+
+def test_a_signal_inside_a_compiled_kernel_is_a_keyboard_interrupt():
+    """A signal whose handler runs inside numba's code (``_numba_unpickle``, called back on every array the CBF
+    filter's row kernel returns) would leave the kernel as SystemError; it is delivered again a few ms later and
+    raises KeyboardInterrupt outside the kernel. A profile hook at the callback's call event runs the installed
+    handler with the callback's frame, as Python's signal machinery would for a signal pending at its first bytecode
+    (where CI's SIGTERM landed); the second delivery is a real signal."""
+    from bigcbf.control.cbf import cbf_rows
+    from bigcbf.logio.interrupts import interrupts_as_keyboard_interrupt
+    from bigcbf.params import SIMULATION
+    from bigcbf.types import Obstacles
+
+    state, u_in = RobotState(0.0, 0.0, 0.0), np.array([0.7, 0.3, 0.0])
+    obs = Obstacles.from_lists([[1.0, 0.0]], r=0.2)
+    expected = cbf_rows(state, obs, u_in, SIMULATION)                    # compiled (or loaded) here
+    landed = []
+
+    def hook(frame, event, arg):
+        if event == "call" and frame.f_code.co_name == "_numba_unpickle" and not landed:
+            landed.append(frame.f_globals["__name__"])
+            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, frame)
+    with interrupts_as_keyboard_interrupt():
+        with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+            sys.setprofile(hook)
+            try:
+                rows = cbf_rows(state, obs, u_in, SIMULATION)
+            finally:
+                sys.setprofile(None)
+            np.testing.assert_array_equal(rows.a, expected.a)                # the kernel finished untouched
+            time.sleep(1.0)                                                  # then the signal, again
+    assert landed and landed[0].startswith("numba.")
 
 
 def test_an_interrupt_while_the_logger_starts_leaves_no_file(tmp_path, monkeypatch):
