@@ -45,9 +45,9 @@ from bigcbf.params.stack import ExecutionModel, StackParams, Tau95Parts
 from bigcbf.params.toml_io import from_dict, to_dict
 
 from .delay import DelayEstimate, DelayOptions, estimate_delay
-from .execution import (AXES, ExecutionFit, ExecutionOptions, gain_intervals, identified_axes, input_condition,
+from .execution import (AXES, ExecutionFit, ExecutionOptions, identified_axes, input_condition,
                         saturated_samples, settled_samples)
-from .limits import LimitOptions, SaturatingModel, fit_model
+from .limits import LimitOptions, SaturatingModel, fit_model, gain_intervals
 from .residual import ResidualBound, ResidualOptions, calibrate_bound, conformal_quantile, holdout_mask
 from .signals import intervals, quantile_upper, zoh
 from .timebase import OdomTiming, TimebaseOptions, command_publication, prepare
@@ -387,9 +387,10 @@ def calibrate_series(data: LogData, opt: CalibrationOptions = CalibrationOptions
         raise UserError(f"too few usable samples for the residual bound ({int((use & ~held).sum())} settled, "
                         f"unsaturated samples in the calibration blocks, need {MIN_MESSAGES})", file=path)
     fit = ExecutionFit(st.A, st.d, axes, sat[~held] | short[~held], int((use & ~held).sum()), settled_only)
-    # A's samples: the settled ones of the calibration blocks, clearly below a wheel limit (limits.fit_static)
-    gain_use = model.settled & ~held & ~st.near_limit(u, opt.limits.kink_margin)
-    gain_ci = gain_intervals(t[gain_use], u[gain_use], v[gain_use], axes, st.A, opt.execution)
+    # A's interval: a bootstrap of the fit that gave it, on its samples (limits.gain_intervals)
+    su = model.static_use
+    gain_ci = gain_intervals(t[su], model.static_u[su], v[su], axes, st, opt.execution.gain_block_s,
+                             opt.execution.gain_bootstrap, opt.execution.gain_level)
     r = v - fit.predict(u)
     speed = np.hypot(u[:, 0], u[:, 1])
     resid = np.hypot(r[:, 0], r[:, 1])

@@ -22,10 +22,10 @@ Samples are the odometry messages; each is paired with the command in force one 
   log's demands, and it belongs to a run of such samples lasting at least 0.3 s (a drive at its limit stays
   there while the command does; a brief dip, e.g. wheel slip or odometry noise, is not saturation). The fit is
   repeated without them (twice).
-- Intervals of A's diagonal (:func:`gain_intervals`): a block bootstrap of the same least squares over the samples
-  the fit used, in blocks of ``gain_block_s`` seconds (the residuals are correlated over the execution residual's
-  hold and the drive's steps; resampling single samples would treat them as independent and read too narrow),
-  percentile interval re-centred on the reported gain.
+- Intervals of A's diagonal: ``twin.limits.gain_intervals``, a block bootstrap (blocks of ``gain_block_s`` seconds:
+  the residuals are correlated over the execution residual's hold and the drive's steps; resampling single samples
+  would treat them as independent and read too narrow) of the fit that gave the reported A (``bigcbf calibrate``'s
+  A is the saturating model's static part, ``twin.limits``).
 """
 from __future__ import annotations
 
@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lstsq
 
-from .signals import expanded_levels
 
 AXES = ("vx", "vy", "wz")
 
@@ -170,36 +169,3 @@ def fit_execution(t: np.ndarray, u: np.ndarray, v: np.ndarray, opt: ExecutionOpt
         use = settled & ~sat
         A, d = least_squares(u[use], v[use], axes)
     return ExecutionFit(A, d, axes, sat, int((settled & ~sat).sum()), settled_only)
-
-
-def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray, A: np.ndarray,
-                   opt: ExecutionOptions = ExecutionOptions(), seed: int = 0) -> np.ndarray:
-    """(3, 2): the ``gain_level`` interval of A's diagonal of eq:execution (1) (nan where an axis is not identified).
-
-    The samples (times t, aligned commands u, twists v; those the fit used) are cut into consecutive time blocks of
-    ``gain_block_s``; ``gain_bootstrap`` times, as many blocks as there are are drawn with replacement and A is
-    refitted by :func:`least_squares`; the percentile interval of each diagonal entry (expanded for the number of
-    blocks, :func:`twin.signals.expanded_levels`) is shifted by the reported
-    A minus the fit on all the samples (the reported A may come from a slightly different sample set, e.g. below a
-    wheel limit's kink). Fewer than 6 blocks: no interval (nan)."""
-    t, u, v = np.asarray(t, float), np.asarray(u, float), np.asarray(v, float)
-    axes = np.asarray(axes, bool)
-    out = np.full((3, 2), np.nan)
-    if len(t) == 0 or not axes.any():
-        return out
-    block = np.floor((t - t[0]) / opt.gain_block_s).astype(int)
-    starts = np.flatnonzero(np.r_[True, np.diff(block) != 0])
-    groups = np.split(np.arange(len(t)), starts[1:])
-    if len(groups) < 6:
-        return out
-    A_all, _ = least_squares(u, v, axes)
-    rng = np.random.default_rng(seed)
-    diag = np.empty((opt.gain_bootstrap, 3))
-    for b in range(opt.gain_bootstrap):
-        ii = np.concatenate([groups[k] for k in rng.integers(0, len(groups), len(groups))])
-        Ab, _ = least_squares(u[ii], v[ii], axes)
-        diag[b] = np.diag(Ab)
-    q = np.quantile(diag, expanded_levels(opt.gain_level, len(groups)), axis=0).T      # (3, 2)
-    shift = np.diag(np.asarray(A, float)) - np.diag(A_all)
-    out[axes] = q[axes] + shift[axes, None]
-    return out

@@ -105,58 +105,87 @@ def test_fit_uses_settled_samples_when_there_are_enough():
     np.testing.assert_allclose(fit.predict(u[:3]), u[:3] @ A_TRUE.T + D_TRUE, atol=1e-9)
 
 
-def _held_drive(rng, n_blocks=40, per_block=100, phi=0.8, sigma=0.02):
-    """A drive of held commands (one per 2-s block, 50 Hz samples) with AR(1) residuals: v = G u + d + r."""
-    t = np.arange(n_blocks * per_block) * 0.02
-    u = np.repeat(rng.uniform(-0.6, 0.6, (n_blocks, 3)), per_block, axis=0)
+def _held_drive(rng, n_blocks=40, per_block=100, phi=0.8, sigma=0.02, limit=None, dt=0.02):
+    """A drive of held commands (one per 2-s block) with AR(1) residuals: v = sat(G u + d) + r, where ``limit``
+    (rim-speed limit, lever) saturates the wheels (``twin.limits.saturate``) or is None."""
+    from twin.limits import saturate
+    t = np.arange(n_blocks * per_block) * dt
+    u = np.repeat(rng.uniform(-0.6, 0.6, (n_blocks, 3)) * [1.0, 1.0, 1.5], per_block, axis=0)
     r = np.zeros_like(u)
     e = rng.normal(0, sigma, u.shape)
     for k in range(1, len(u)):
         r[k] = phi * r[k - 1] + e[k]
     G = np.diag([0.9, 1.1, 0.8])
     d = np.array([0.01, -0.02, 0.03])
-    return t, u, u @ G.T + d + r, G
+    p = u @ G.T + d
+    return t, u, (p if limit is None else saturate(p, *limit)) + r, G
 
 
-def test_gain_intervals_cover_the_truth_at_their_level_on_correlated_residuals():
-    """gain_intervals: over 60 independent drives with AR(1) residuals (phi 0.8, correlated over ~0.1 s), the 90 %
-    intervals of the three gains hold the truth within the binomial band of 180 cases at 90 % (95 % band 154-170);
-    the re-centring moves the interval by exactly the given A's difference from the fit on all samples."""
+@pytest.mark.parametrize("limit", [None, (0.55, 0.17)], ids=["linear", "wheel_limit"])
+def test_gain_intervals_cover_the_truth_at_their_level_on_correlated_residuals(limit):
+    """twin.limits.gain_intervals, the one-step block bootstrap of the static fit: over 30 independent drives with
+    AR(1) residuals (phi 0.8), fitted by ``fit_static`` itself (linear, or with a wheel limit that 30-60 % of the
+    samples reach: the saturating least squares), the 90 % intervals of the three gains hold the truth within the
+    binomial band of 90 cases at 90 % (95 % band 75-86), and hold the reported gain."""
     from scipy.stats import binom
-    from twin.execution import gain_intervals
+
+    from twin.limits import fit_static, gain_intervals
     rng = np.random.default_rng(7)
-    opt = ExecutionOptions(gain_bootstrap=200)
     axes = np.ones(3, bool)
     hits = []
-    for _ in range(60):
-        t, u, v, G = _held_drive(rng)
-        A_all, _ = least_squares(u, v, axes)
-        ci = gain_intervals(t, u, v, axes, A_all, opt)
-        assert np.all(ci[:, 0] < np.diag(A_all)) and np.all(np.diag(A_all) < ci[:, 1])
+    for _ in range(30):
+        t, u, v, G = _held_drive(rng, per_block=25, dt=0.08, phi=0.4, limit=limit)
+        st = fit_static(u, v, axes)
+        assert (st.v_max is None) == (limit is None)
+        ci = gain_intervals(t, u, v, axes, st, resamples=200)
+        assert np.all(ci[:, 0] < np.diag(st.A)) and np.all(np.diag(st.A) < ci[:, 1])
         hits += [ci[j, 0] <= G[j, j] <= ci[j, 1] for j in range(3)]
     lo, hi = binom.interval(0.95, len(hits), 0.90)
     assert lo <= sum(hits) <= hi, sum(hits)
-    shifted = gain_intervals(t, u, v, axes, A_all + 0.05 * np.eye(3), opt)
-    assert np.allclose(shifted - ci, 0.05)
+
+
+def test_gain_intervals_of_the_linear_fit_are_its_block_bootstrap():
+    """Without a limit the model is linear and one Gauss-Newton step is the refit itself: the interval equals, to
+    rounding, the percentile interval of least squares refitted on the same resampled blocks (the same counts
+    drawn), computed here apart by weighted least squares."""
+    from twin.execution import least_squares
+    from twin.limits import fit_static, gain_intervals
+    from twin.signals import expanded_levels
+    rng = np.random.default_rng(5)
+    t, u, v, _ = _held_drive(rng, n_blocks=12)
+    axes = np.ones(3, bool)
+    st = fit_static(u, v, axes)
+    assert st.v_max is None
+    np.testing.assert_allclose(st.A, least_squares(u, v, axes)[0], atol=1e-12)
+    ci = gain_intervals(t, u, v, axes, st, resamples=50, seed=4)
+    block = np.floor(t / 2.0).astype(int)
+    counts = np.random.default_rng(4).multinomial(12, np.full(12, 1 / 12), size=50)
+    X = np.column_stack([u, np.ones(len(u))])
+    diag = []
+    for c in counts:
+        w = np.sqrt(c[block].astype(float))
+        beta = np.linalg.lstsq(X * w[:, None], v * w[:, None], rcond=None)[0]
+        diag.append(np.diag(beta[:3].T))
+    np.testing.assert_allclose(ci, np.quantile(diag, expanded_levels(0.90, 12), axis=0).T, atol=1e-9)
 
 
 def test_gain_intervals_by_block_not_by_sample():
     """Resampling whole 2-s blocks: with strongly correlated residuals (phi 0.98) the interval is wider than a
     bootstrap of single samples would give (independent samples: 1.645 sigma / sqrt(n) per side), and an axis that
     is not identified, or a log shorter than six blocks, gets no interval (nan)."""
-    from twin.execution import gain_intervals
+    from twin.limits import fit_static, gain_intervals
     rng = np.random.default_rng(3)
     t, u, v, _ = _held_drive(rng, phi=0.98, sigma=0.01)
     axes = np.array([True, False, True])
-    A_all, _ = least_squares(u, v, axes)
-    ci = gain_intervals(t, u, v, axes, A_all)
+    st = fit_static(u, v, axes)
+    ci = gain_intervals(t, u, v, axes, st)
     assert np.isnan(ci[1]).all() and np.isfinite(ci[[0, 2]]).all()
     X = np.column_stack([u[:, [0, 2]], np.ones(len(u))])
     res = v[:, [0, 2]] - X @ np.linalg.lstsq(X, v[:, [0, 2]], rcond=None)[0]
     iid_half = 1.645 * res.std(axis=0) * np.sqrt(np.diag(np.linalg.inv(X.T @ X))[:2])
     assert np.all((ci[[0, 2], 1] - ci[[0, 2], 0]) / 2 > 2 * iid_half)
     short = t < 10.0
-    assert np.isnan(gain_intervals(t[short], u[short], v[short], axes, A_all)).all()
+    assert np.isnan(gain_intervals(t[short], u[short], v[short], axes, st)).all()
 
 
 def test_input_condition_leaves_out_unknown_commands():
