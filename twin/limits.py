@@ -299,6 +299,25 @@ def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndar
     return unpack(r.x)
 
 
+def _block_normal_equations(residual, x0: np.ndarray, block: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per block b of the samples: J_b^T J_b (nb, p, p) and J_b^T r_b (nb, p) of ``residual`` (x -> (n, m)) at x0,
+    summed over the block's samples and the m axes; J by central differences (the saturating model is piecewise
+    linear: exact away from the kink)."""
+    r0 = residual(x0)
+    J = np.empty(r0.shape + (len(x0),))                                                # (n, m, p)
+    for i in range(len(x0)):
+        h = 1e-6 * max(1.0, abs(x0[i]))
+        xp, xm = x0.copy(), x0.copy()
+        xp[i] += h
+        xm[i] -= h
+        J[..., i] = (residual(xp) - residual(xm)) / (2 * h)
+    G = np.zeros((nb, len(x0), len(x0)))
+    g = np.zeros((nb, len(x0)))
+    np.add.at(G, block, np.einsum("nap,naq->npq", J, J))
+    np.add.at(g, block, np.einsum("nap,na->np", J, r0))
+    return G, g
+
+
 def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray, st: StaticFit,
                    block_s: float = 2.0, resamples: int = 400, level: float = 0.90, seed: int = 0) -> np.ndarray:
     """(3, 2): the ``level`` interval of the diagonal of ``st.A`` (eq:execution (1)), nan where an axis is not
@@ -341,19 +360,7 @@ def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray
 
     x0 = np.r_[st.A[np.ix_(idx, idx)].ravel(), st.d[idx], [st.v_max] if limit else [], [st.lever_m] if fit_lever
                else []]
-    r0 = residual(x0)
-    J = np.empty(r0.shape + (len(x0),))                                                # (n, m, p)
-    for i in range(len(x0)):                                       # central differences (the model is piecewise
-        h = 1e-6 * max(1.0, abs(x0[i]))                            # linear: exact away from the kink)
-        xp, xm = x0.copy(), x0.copy()
-        xp[i] += h
-        xm[i] -= h
-        J[..., i] = (residual(xp) - residual(xm)) / (2 * h)
-    # per block: J_b^T J_b and J_b^T r_b (summed over its samples and the identified axes)
-    G = np.zeros((nb, len(x0), len(x0)))
-    g = np.zeros((nb, len(x0)))
-    np.add.at(G, block, np.einsum("nap,naq->npq", J, J))
-    np.add.at(g, block, np.einsum("nap,na->np", J, r0))
+    G, g = _block_normal_equations(residual, x0, block, nb)
     rng = np.random.default_rng(seed)
     counts = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=resamples).astype(float)    # (B, nb)
     H = np.einsum("bk,kpq->bpq", counts, G)
