@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lstsq
 
-
 AXES = ("vx", "vy", "wz")
 
 

@@ -263,6 +263,37 @@ def fit_static(u: np.ndarray, v: np.ndarray, axes: np.ndarray, opt: LimitOptions
                      np.array([c[2] for c in cands]) if reached else np.zeros(0), len(u))
 
 
+class _StaticLSQ:
+    """The least squares of the saturating model's static part on samples u, v (n, 3): its parameter vector x = (A's
+    identified block row by row, d's identified entries, [the limit if ``limit``], [the lever if ``lever``]) and
+    the scaled residual (v - sat(A u + d)) / sc on the identified axes, (n, m). The rest of A, d (the identity rows
+    of axes not identified) and a lever not fitted come from ``A``, ``d``, ``k``."""
+
+    def __init__(self, u, v, axes, sc, A, d, k, limit: bool, lever: bool):
+        self.u, self.v, self.sc = u, v, sc
+        self.idx = np.flatnonzero(axes)
+        self.A, self.d, self.k = A, d, k
+        self.limit, self.lever = limit, lever
+
+    def pack(self, A, d, vm, k) -> np.ndarray:
+        idx = self.idx
+        return np.r_[A[np.ix_(idx, idx)].ravel(), d[idx], [vm] if self.limit else [], [k] if self.lever else []]
+
+    def unpack(self, x):
+        """(A, d, the limit or None, the lever)"""
+        idx, m = self.idx, len(self.idx)
+        A_, d_ = self.A.copy(), self.d.copy()
+        A_[np.ix_(idx, idx)] = x[:m * m].reshape(m, m)
+        d_[idx] = x[m * m:m * m + m]
+        vm = float(x[m * m + m]) if self.limit else None
+        return A_, d_, vm, float(x[m * m + m + 1]) if self.lever else float(self.k)
+
+    def residual(self, x) -> np.ndarray:
+        A_, d_, vm, k = self.unpack(x)
+        idx = self.idx
+        return (self.v[:, idx] - saturate(self.u @ A_.T + d_, vm, k)[:, idx]) / self.sc[idx]
+
+
 def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndarray):
     """A, d, the limit and the lever by one least-squares fit of the saturating model on every settled sample (the
     Gaussian maximum-likelihood fit of step 1), started from the alternating search's answer. The alternation
@@ -273,22 +304,14 @@ def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndar
     grid's range (fixed when the log cannot identify it); a fit that does not lower the error is not taken. Only
     the identified axes' block of A and d is fitted: the other rows keep what ``least_squares`` gave them (identity)."""
     from scipy.optimize import least_squares as nls
-    idx = np.flatnonzero(axes)
-    m = len(idx)
-
-    def unpack(x):
-        A_, d_ = A.copy(), d.copy()
-        A_[np.ix_(idx, idx)] = x[:m * m].reshape(m, m)
-        d_[idx] = x[m * m:m * m + m]
-        return A_, d_, float(x[m * m + m]), float(x[m * m + m + 1]) if lever_id else float(k)
-
-    def res(x):
-        A_, d_, vm_, k_ = unpack(x)
-        return ((v[:, idx] - saturate(u @ A_.T + d_, vm_, k_)[:, idx]) / sc[idx]).ravel()
-
+    lsq = _StaticLSQ(u, v, axes, sc, A, d, k, True, lever_id)
+    m = len(lsq.idx)
     lo = np.r_[np.full(m * m + m, -np.inf), 1e-3, [levers.min()] if lever_id else []]
     hi = np.r_[np.full(m * m + m, np.inf), np.inf, [levers.max()] if lever_id else []]
-    x0 = np.clip(np.r_[A[np.ix_(idx, idx)].ravel(), d[idx], vm, [k] if lever_id else []], lo, hi)
+    x0 = np.clip(lsq.pack(A, d, vm, k), lo, hi)
+
+    def res(x):
+        return lsq.residual(x).ravel()
     r0 = res(x0)
     try:
         r = nls(res, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=200)
@@ -296,7 +319,7 @@ def _refine_jointly(u, v, axes, sc, A, d, vm, k, lever_id: bool, levers: np.ndar
         return A, d, vm, k
     if not np.isfinite(r.x).all() or float(r.fun @ r.fun) >= float(r0 @ r0):
         return A, d, vm, k
-    return unpack(r.x)
+    return lsq.unpack(r.x)
 
 
 def _block_normal_equations(residual, x0: np.ndarray, block: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray]:
@@ -347,20 +370,9 @@ def gain_intervals(t: np.ndarray, u: np.ndarray, v: np.ndarray, axes: np.ndarray
     if nb < 6:
         return out
     limit = st.v_max is not None
-    fit_lever = limit and st.lever_identified
-    sc = _scale(u, axes)
-
-    def residual(x):
-        A_, d_ = st.A.copy(), st.d.copy()
-        A_[np.ix_(idx, idx)] = x[:m * m].reshape(m, m)
-        d_[idx] = x[m * m:m * m + m]
-        vm = float(x[m * m + m]) if limit else None
-        k = float(x[m * m + m + 1]) if fit_lever else st.lever_m
-        return (v[:, idx] - saturate(u @ A_.T + d_, vm, k)[:, idx]) / sc[idx]           # (n, m)
-
-    x0 = np.r_[st.A[np.ix_(idx, idx)].ravel(), st.d[idx], [st.v_max] if limit else [], [st.lever_m] if fit_lever
-               else []]
-    G, g = _block_normal_equations(residual, x0, block, nb)
+    lsq = _StaticLSQ(u, v, axes, _scale(u, axes), st.A, st.d, st.lever_m, limit, limit and st.lever_identified)
+    x0 = lsq.pack(st.A, st.d, st.v_max, st.lever_m)
+    G, g = _block_normal_equations(lsq.residual, x0, block, nb)
     rng = np.random.default_rng(seed)
     counts = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=resamples).astype(float)    # (B, nb)
     H = np.einsum("bk,kpq->bpq", counts, G)
