@@ -83,6 +83,8 @@ class LimitOptions:
     fine_step_s: float = 0.0025         # grid of the final per-axis search (refine_dynamic; = step_s: none) [s]
     fine_dead_s: float = 0.00125        # its dead-time step [s]
     fine_span_s: float = 0.01           # ... within this of the coarse search's [s]
+    fine_accel_rel: tuple[float, ...] = (0.97, 1.03)   # acceleration limits beside the coarse fit's that the
+    #                                     fine search chooses among, point and resamples alike (relative; () none) [-]
 
 
 def rim_matrix(lever_m: float) -> np.ndarray:
@@ -629,7 +631,7 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
     # translation), and a lag shared with a slower axis would call that axis settled while it still moves
     offs = np.arange(-0.05, 0.0501, 0.005)
     lag_grid = np.unique(np.r_[lags, T0])
-    lat, lag_axes, ci = _axis_search(prob, np.full(3, L0), np.full(3, T0), a0, offs, [lag_grid] * 3, opt, seed)
+    lat, lag_axes, ci, _ = _axis_search(prob, np.full(3, L0), np.full(3, T0), a0, offs, [lag_grid] * 3, opt, seed)
     notes = []
     for j in np.flatnonzero(axes):
         if np.isfinite(lat[j]) and (abs(lat[j] - (L0 + offs[0])) < 1e-9 or abs(lat[j] - (L0 + offs[-1])) < 1e-9):
@@ -643,48 +645,74 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
 
 
 def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a: float, offs: np.ndarray,
-                 lag_sets: list, opt: LimitOptions, seed: int = 0):
+                 lag_sets: list, opt: LimitOptions, seed: int = 0, accel_rel: tuple[float, ...] = ()):
     """Each identified axis's dead time (L_base[j] + offs) and lag (lag_sets[j]), the other axes at their base
     values, by that axis's own error; and the 5-95 % bootstrap interval over the blocks of its half-step delay
     (dead time + T ln 2: what the log pins down, dead time and lag trade off), given as the dead time at the
-    chosen lag. Returns (dead times (3,), lags (3,), intervals (3, 2)); nan on the other axes."""
+    chosen lag. Returns (dead times (3,), lags (3,), intervals (3, 2)); nan on the other axes.
+
+    ``accel_rel``: acceleration limits a * each (with a finite ``a``) are candidates too. The limit is common to
+    the axes: the point estimate and each resample choose it by the geometric mean over the axes of each axis's
+    best error at that limit (as the coarse search's _best does), then each axis's dead time and lag at it; the
+    chosen limit is returned fourth. Behind a ramp a slower limit reads as a later start, so an interval at a
+    fixed limit leaves out the limit's own error (the recovery's latency intervals missed most at the lowest
+    limits), and choosing the limit in the resamples alone moved the interval away from the point estimate."""
     axes = prob.axes
-    rows, lag_rows, which = [], [], []
+    rows, lag_rows, acc_rows, which = [], [], [], []
+    accels = [a] + ([a * r for r in accel_rel] if np.isfinite(a) else [])
     for j in np.flatnonzero(axes):
-        for o in offs:
-            for T in lag_sets[j]:
-                L = np.array(L_base, float)
-                L[j] = max(L_base[j] + o, 0.0)
-                Tj = np.array(T_base, float)
-                Tj[j] = T
-                rows.append(L)
-                lag_rows.append(Tj)
-                which.append(j)
+        for aa in accels:
+            for o in offs:
+                for T in lag_sets[j]:
+                    L = np.array(L_base, float)
+                    L[j] = max(L_base[j] + o, 0.0)
+                    Tj = np.array(T_base, float)
+                    Tj[j] = T
+                    rows.append(L)
+                    lag_rows.append(Tj)
+                    acc_rows.append(aa)
+                    which.append(j)
     lat = np.full(3, np.nan)
     ci = np.full((3, 2), np.nan)
     lag_axes = np.array(T_base, float)
     if not rows:
-        return lat, lag_axes, ci
+        return lat, lag_axes, ci, a
     rng = np.random.default_rng(seed)
-    c = Candidates(np.array(rows), np.array(lag_rows), np.full(len(rows), a))
+    acc_rows = np.array(acc_rows, float)
+    c = Candidates(np.array(rows), np.array(lag_rows), acc_rows)
     err = prob.simulate(c)
     which = np.array(which)
     W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
     step = float(np.min(np.diff(offs))) if len(offs) > 1 else 0.0
-    for j in np.flatnonzero(axes):
-        sel = np.flatnonzero(which == j)
-        e = err[sel][:, :, j]                      # (K, B): axis j's own error per block
-        best = sel[np.argmin(e.sum(axis=1))]
+    ax = np.flatnonzero(axes)
+    # per axis: candidates grouped by acceleration limit; the limit is common: chosen by the geometric mean over
+    # the axes of each axis's best error at it (as _best), then each axis's dead time and lag at that limit
+    groups = {j: [np.flatnonzero((which == j) & (acc_rows == aa)) for aa in accels] for j in ax}
+    full = {j: [err[g][:, :, j] for g in groups[j]] for j in ax}          # (K, B) per axis and limit
+
+    def choose(weights):
+        """weights (R, B) -> per resample the limit's index (R,) and per axis the candidate (R,)"""
+        score = np.zeros((len(weights), len(accels)))
+        best = {j: np.zeros((len(weights), len(accels)), int) for j in ax}
+        for j in ax:
+            for q, e in enumerate(full[j]):
+                tot = weights @ e.T                                        # (R, K)
+                k = np.argmin(tot, axis=1)
+                best[j][:, q] = groups[j][q][k]
+                score[:, q] += np.log(np.maximum(tot[np.arange(len(weights)), k], 1e-300))
+        qs = np.argmin(score, axis=1)
+        return qs, {j: best[j][np.arange(len(weights)), qs] for j in ax}
+    q0, b0 = choose(np.ones((1, prob.nblocks)))
+    a_best = float(accels[int(q0[0])])
+    _, picks_all = choose(W.astype(float))
+    for j in ax:
+        best = int(b0[j][0])
         lat[j], lag_axes[j] = float(c.L[best, j]), float(c.T[best, j])
-        picks = sel[np.argmin(W @ e.T, axis=1)]
+        picks = picks_all[j]
         half = c.L[picks, j] + c.T[picks, j] * np.log(2)
-        # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
-        # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
-        # moves out by half a step (else a 90 % interval reads [0.050, 0.050]); the quantiles are those of a 90 %
-        # interval expanded for the few blocks (signals.expanded_levels: 2.1-97.9 % at 8 blocks)
         q = expanded_levels(0.90, prob.nblocks)
         ci[j] = np.quantile(half, q) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
-    return lat, lag_axes, ci
+    return lat, lag_axes, ci, a_best
 
 
 def refine_dynamic(prob: DynamicProblem, dyn: DynamicFit, opt: LimitOptions = LimitOptions(),
@@ -701,8 +729,9 @@ def refine_dynamic(prob: DynamicProblem, dyn: DynamicFit, opt: LimitOptions = Li
     T = dyn.axis_lags_s
     lag_sets = [np.unique(np.clip(T[j] + np.arange(-0.0075, 0.00751, 0.0025), 0.0, None)) for j in range(3)]
     a = np.inf if dyn.accel_max is None else dyn.accel_max
-    lat, lags, ci = _axis_search(prob, L, T, a, offs, lag_sets, opt, seed)
-    return replace(dyn, latency_s=lat, latency_ci_s=ci, lags_s=lags)
+    lat, lags, ci, a_best = _axis_search(prob, L, T, a, offs, lag_sets, opt, seed, opt.fine_accel_rel)
+    return replace(dyn, latency_s=lat, latency_ci_s=ci, lags_s=lags,
+                   accel_max=None if not np.isfinite(a_best) else a_best)
 
 
 @dataclass

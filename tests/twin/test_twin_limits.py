@@ -175,3 +175,27 @@ def test_refined_dead_time_follows_a_latency_between_grid_points():
         assert fine.accel_max == pytest.approx(1.5, rel=0.1)
         halves.append(fine.latency_s + fine.axis_lags_s * np.log(2))
     np.testing.assert_allclose(halves[1] - halves[0], 0.006, atol=0.002)
+
+
+def test_fine_search_refines_the_acceleration_limit_with_the_dead_time():
+    """Behind a ramp a slower acceleration limit reads as a later start. refine_dynamic chooses the limit among the
+    coarse fit's and +-3 % of it (common to the axes, by the geometric mean of the axes' best errors), the point
+    estimate and every resample alike. Given the coarse limit 3 % off either way on a drive with a 1.5 m/s^2 limit
+    and a 100 ms dead time, it returns the true limit, the dead time within 5 ms, and the point inside its
+    interval on every axis; with no candidates beside the given limit (fine_accel_rel=()) the limit stays."""
+    from dataclasses import replace
+    from twin.limits import DynamicProblem, LimitOptions, StaticFit, fit_dynamic, refine_dynamic
+    st = StaticFit(np.eye(3), np.zeros(3), None, 0.1645, (0.1645, 0.1645), True, 0.0, 0, 0.0, 0.0, np.eye(3),
+                   np.zeros(3))
+    t_cmd, u_cmd, ts, v = _limited_drive(0.100)
+    block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
+    args = (t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), st)
+    dyn = fit_dynamic(DynamicProblem(*args, 0.01, 0.02))
+    for off in (1 / 1.03, 1.03):
+        given = replace(dyn, accel_max=1.5 * off)
+        fine = refine_dynamic(DynamicProblem(*args, 0.0025, 0.02), given)
+        assert fine.accel_max == pytest.approx(1.5, rel=0.005), off
+        np.testing.assert_allclose(fine.latency_s, 0.100, atol=0.005, err_msg=str(off))
+        assert np.all(fine.latency_ci_s[:, 0] <= fine.latency_s) and np.all(fine.latency_s <= fine.latency_ci_s[:, 1])
+        kept = refine_dynamic(DynamicProblem(*args, 0.0025, 0.02), given, LimitOptions(fine_accel_rel=()))
+        assert kept.accel_max == pytest.approx(1.5 * off, rel=1e-12), off
