@@ -644,6 +644,24 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
                       lag_axes)
 
 
+def _choose_common_limit(weights: np.ndarray, groups: dict, full: dict, n_limits: int):
+    """The acceleration limit common to the axes and each axis's candidate at it, per weighting of the blocks
+    (``_axis_search``). ``weights`` (R, B); ``groups[j][q]``: the candidate indices of axis j at limit q; ``full[j][q]``
+    (K, B): their errors on axis j per block. The limit: the least geometric mean over the axes of each axis's best
+    weighted error at it (as ``_best``); returns the limit's index (R,) and per axis the chosen candidate (R,)."""
+    R = len(weights)
+    score = np.zeros((R, n_limits))
+    best = {j: np.zeros((R, n_limits), int) for j in groups}
+    for j in groups:
+        for q, e in enumerate(full[j]):
+            tot = weights @ e.T                                        # (R, K)
+            k = np.argmin(tot, axis=1)
+            best[j][:, q] = groups[j][q][k]
+            score[:, q] += np.log(np.maximum(tot[np.arange(R), k], 1e-300))
+    qs = np.argmin(score, axis=1)
+    return qs, {j: best[j][np.arange(R), qs] for j in groups}
+
+
 def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a: float, offs: np.ndarray,
                  lag_sets: list, opt: LimitOptions, seed: int = 0, accel_rel: tuple[float, ...] = ()):
     """Each identified axis's dead time (L_base[j] + offs) and lag (lag_sets[j]), the other axes at their base
@@ -685,26 +703,11 @@ def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a
     W = rng.multinomial(prob.nblocks, np.full(prob.nblocks, 1.0 / prob.nblocks), size=opt.bootstrap)
     step = float(np.min(np.diff(offs))) if len(offs) > 1 else 0.0
     ax = np.flatnonzero(axes)
-    # per axis: candidates grouped by acceleration limit; the limit is common: chosen by the geometric mean over
-    # the axes of each axis's best error at it (as _best), then each axis's dead time and lag at that limit
     groups = {j: [np.flatnonzero((which == j) & (acc_rows == aa)) for aa in accels] for j in ax}
     full = {j: [err[g][:, :, j] for g in groups[j]] for j in ax}          # (K, B) per axis and limit
-
-    def choose(weights):
-        """weights (R, B) -> per resample the limit's index (R,) and per axis the candidate (R,)"""
-        score = np.zeros((len(weights), len(accels)))
-        best = {j: np.zeros((len(weights), len(accels)), int) for j in ax}
-        for j in ax:
-            for q, e in enumerate(full[j]):
-                tot = weights @ e.T                                        # (R, K)
-                k = np.argmin(tot, axis=1)
-                best[j][:, q] = groups[j][q][k]
-                score[:, q] += np.log(np.maximum(tot[np.arange(len(weights)), k], 1e-300))
-        qs = np.argmin(score, axis=1)
-        return qs, {j: best[j][np.arange(len(weights)), qs] for j in ax}
-    q0, b0 = choose(np.ones((1, prob.nblocks)))
+    q0, b0 = _choose_common_limit(np.ones((1, prob.nblocks)), groups, full, len(accels))
     a_best = float(accels[int(q0[0])])
-    _, picks_all = choose(W.astype(float))
+    _, picks_all = _choose_common_limit(W.astype(float), groups, full, len(accels))
     for j in ax:
         best = int(b0[j][0])
         lat[j], lag_axes[j] = float(c.L[best, j]), float(c.T[best, j])
