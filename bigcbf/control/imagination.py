@@ -430,10 +430,13 @@ def _barrier_terms(ro: _Rollout, speed: np.ndarray, obstacles: Obstacles, params
         G = A[:2] @ A[:2].T
         grad2 = 4.0 * (G[0, 0] * qb.real ** 2 + 2 * G[0, 1] * qb.real * qb.imag + G[1, 1] * qb.imag ** 2)
     h, margin, wterm = (np.empty((B, N + 1, M)), np.empty((B, N + 1, M)), np.empty((B, N, M)))
+    # every array C-ordered: numba compiles one machine code per layout, and these broadcasts come out C, F or A
+    # with the number of obstacles (three compiles of this kernel met one by one in the first episodes)
     _barrier_kernel(np.ascontiguousarray(Pc), np.ascontiguousarray(Vc), np.ascontiguousarray(Oc), Ov,
-                    np.asarray(obstacles.r, float), rel_speed, pred, e_exec, float(kap), shared, float(params.noshared_margin_m),
-                    float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s), float(unc.e_zoh_m),
-                    float(params.alpha_per_s), float(params.w_eps), grad2, h, margin, wterm)
+                    np.asarray(obstacles.r, float), np.ascontiguousarray(rel_speed), pred, e_exec, float(kap), shared,
+                    float(params.noshared_margin_m), float(unc.r_robot_m), float(unc.d0_m), float(unc.tau95_s),
+                    float(unc.e_zoh_m), float(params.alpha_per_s), float(params.w_eps), np.ascontiguousarray(grad2),
+                    h, margin, wterm)
     Ns = N if score_steps is None else min(score_steps, N)      # Ns = N: the full arrays, the same sums
     h_min = h[:, :Ns + 1].reshape(B, -1).min(axis=1)
     if Ns < N:

@@ -123,20 +123,39 @@ class SafetyStack:
 
     def warm_up(self) -> float:
         """Run perception, planner and filter of a throwaway copy of this stack on a made-up scene, so that the
-        compiled kernels are compiled now and not at the first real scan. Returns the seconds it took."""
+        compiled kernels are compiled (or loaded from numba's cache) now and not at the first real scan or the first
+        time the filter engages. Returns the seconds it took.
+
+        The scene (synthetic scans, ``perception.synthetic.ray_scan``): the robot drives 3 s at 0.3 m/s toward a
+        goal 3 m ahead (10 Hz scans, 20 Hz control; the path scripted, not the method's) past a wall 0.6 m to its
+        left and a box, while a walker crosses its path at 1 m/s: tracks confirmed, static and dynamic, imagined
+        candidates near obstacles. Then the filter alone on made-up estimates: a command into an obstacle 0.5 m
+        ahead (the filter's QP with active rows) and a robot boxed in by wall points within its safety distance
+        (the infeasible case). The warm-up before this one (a still and a moving blob, nothing near) left the
+        filter's QP (solve_hard, gi_solve, _kkt, _solve_dense, _box_rows, _clip_violation) and two more array
+        layouts of the imagination's barrier kernel to the first real encounters: seconds of compiling inside a
+        control step on a fresh install, a late command or the overrun valve's zero command there
+        (tests/ros2/test_ros2_warmup.py)."""
+        from ..perception.synthetic import box_segments, ray_scan
+
         t0 = time.perf_counter()
-        n = 360
-        ranges = np.full(n, np.inf, np.float32)
-        ranges[170:190] = 1.5
-        scan = LaserScan(stamp=0.0, angle_min=-math.pi, angle_increment=2 * math.pi / n, range_min=0.05,
-                         range_max=12.0, ranges=ranges, frame_id="laser", time_increment=0.0, scan_time=0.1)
         twin = SafetyStack(self.method, self.params, self.perception_params, method_params=self.method_params)
         twin.set_goal(3.0, 0.0)
-        pose = RobotState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        for k in range(12):      # 3 scans of a still blob, then one moving across the scan (a walker's paths)
-            if k >= 3:
-                ranges = np.full(n, np.inf, np.float32)
-                ranges[150 + 2 * k:160 + 2 * k] = 2.0
-            twin.scan(replace(scan, stamp=0.1 * k, ranges=ranges), pose)
-            twin.control(0.1 * k, pose, None if twin.planner is not None else np.array([0.2, 0.0, 0.0]))
+        walls = [(-0.5, 0.6, 3.5, 0.6)] + box_segments(1.6, -0.9, 0.15, 0.15)
+        for k in range(60):              # 3 s at the control rate, a scan every other tick; the robot's path is
+            t = 0.05 * k                 # scripted (0.3 m/s ahead), so every method's stack sees the same scans
+            pose = RobotState(0.3 * t, 0.0, 0.0, 0.3, 0.0, 0.0)
+            if k % 2 == 0:
+                walker = (1.2, -1.6 + 1.0 * t, 0.25)
+                twin.scan(ray_scan((pose.px, pose.py, pose.theta), [walker], walls, stamp=t, noise=0.01,
+                                   rng=np.random.default_rng(k)), pose)
+            twin.control(t, pose, None if twin.planner is not None else np.array([0.4, 0.0, 0.0]))
+        here = RobotState(0.0, 0.0, 0.0, 0.3, 0.0, 0.0)
+        ahead = Obstacles(np.array([[0.5, 0.05]]), np.zeros((1, 2)), np.tile(1e-4 * np.eye(2), (1, 1, 1)),
+                          np.array([0.1]), np.ones(1, bool), np.array([0]))
+        twin.cbf.filter(here, ahead, np.array([0.6, 0.0, 0.0]))
+        ring = 0.2 * np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], axis=1)
+        boxed = Obstacles(ring, np.zeros((8, 2)), np.tile(1e-4 * np.eye(2), (8, 1, 1)), np.zeros(8),
+                          np.ones(8, bool), np.full(8, -1))
+        twin.cbf.filter(here, boxed, np.array([0.6, 0.2, 0.0]))
         return time.perf_counter() - t0

@@ -14,7 +14,9 @@ clearance within 5 cm, final distance within 0.1 m, E_CBF and CBF-activity ratio
 
 The overrun watchdog is set to 1 s here: it is a wall-clock valve (tests/ros2/test_ros2_filter_node.py checks it),
 and on a loaded test machine a 50 ms budget would turn a late step into a zero command, which the in-process run
-never sees.
+never sees. A step that compiled a kernel did overrun even 1 s once (a clean-clone CI run: min clearance 0.636
+against 0.893); the node's warm-up now compiles them before it answers (tests/ros2/test_ros2_warmup.py), and the
+node's zero commands are checked first, so such a run names its cause.
 """
 import json
 import os
@@ -52,6 +54,9 @@ def test_filter_drives_the_twin_to_its_goal_like_in_process(domain_id, tmp_path)
     assert sim.returncode == 0, sim.stderr[-2000:]
     assert filt.returncode == 0, f_err[-2000:]
     twin, node = json.loads(sim.stdout), json.loads(f_out)
+    # first the filter node's own account: a step it zeroed (its overrun valve on a late step) moves the twin off
+    # the in-process episode, and the comparisons below would only say that it moved
+    assert node["zero_commands"] == {}
 
     ref = Episode.from_config(load_scenario(SCENARIO, SEED), "big-cbf", SEED, RunConfig()).run().metrics()
     assert twin["success"] and ref["success"]
@@ -61,7 +66,7 @@ def test_filter_drives_the_twin_to_its_goal_like_in_process(domain_id, tmp_path)
     assert twin["min_clearance_m"] == pytest.approx(ref["min_clearance_m"], abs=0.05)
     assert twin["final_goal_dist_m"] == pytest.approx(ref["final_goal_dist_m"], abs=0.1)
     # the filter node's own view of the same steps: every step answered, none by the watchdog
-    assert (node["steps"], node["zero_commands"]) == (twin["control_steps"], {})     # (the reasons, if not)
+    assert node["steps"] == twin["control_steps"]
     assert [m for _, m in node["mode_history"]] == [m for _, m in ref["mode_history"]]
     assert node["e_cbf"] == pytest.approx(ref["e_cbf"], rel=0.1, abs=1e-3)
     assert node["cbf_active_ratio"] == pytest.approx(ref["cbf_active_ratio"], rel=0.1, abs=0.01)
