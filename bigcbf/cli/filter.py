@@ -35,7 +35,8 @@ def add_arguments(p):
                    help="watchdog: zero command when no /odom came for S wall-clock seconds (default 0.5)")
     p.add_argument("--overrun-ms", type=positive_float, default=None, metavar="MS",
                    help="watchdog: a step that took longer than MS (from the message in to /cmd_vel out) sends zero "
-                        "instead (default: the control period T_C, 50 ms)")
+                        "instead (default: the control period T_C, 50 ms; with --lockstep none, the twin's time "
+                        "waits for the answer)")
     p.add_argument("--idle-exit", type=positive_float, default=None, metavar="S",
                    help="stop when no /odom came for S seconds after the first (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="at the end, print the node's summary as one JSON object")

@@ -22,7 +22,9 @@ Topics (names can be remapped with the command line's options)::
 The watchdog sends a zero command (and says why on /filter/status) when the latest /odom or /scan is older than its
 timeout on the wall clock (real time only: in lock-step the simulation may pause), when the scan's stamp is older
 than the timeout at the odometry's stamp, or when a step took longer than its budget (its own overrun; the late
-command is replaced by zero). Until the first scan and the goal, the command is zero too.
+command is replaced by zero; in lock-step only with an explicit budget: the twin's time waits for the answer, and a
+late answer zeroed there made a run on a loaded machine leave the in-process episode). Until the first scan and
+the goal, the command is zero too.
 """
 from __future__ import annotations
 
@@ -56,7 +58,7 @@ class FilterOptions:
     markers: bool = False
     scan_timeout_s: float = 0.5
     odom_timeout_s: float = 0.5
-    overrun_ms: float | None = None         # default: the control period T_C
+    overrun_ms: float | None = None         # default: the control period T_C; in lock-step, none
     idle_exit_s: float | None = None        # stop when no /odom came for this long after the first one
 
 
@@ -95,7 +97,9 @@ class FilterNode:
     def __init__(self, node: transport.Node, stack: SafetyStack, opts: FilterOptions):
         self.node, self.stack, self.opts = node, stack, opts
         self.T_C = stack.params.T_C_s
-        self.budget_ms = 1e3 * self.T_C if opts.overrun_ms is None else float(opts.overrun_ms)
+        #: the overrun budget [ms]; None: none (lock-step without an explicit one: simulated time waits)
+        self.budget_ms = (float(opts.overrun_ms) if opts.overrun_ms is not None
+                          else None if opts.lockstep else 1e3 * self.T_C)
         self.stats = FilterStats()
         self.R_u = stack.params.R_u_diag
         if opts.goal is not None:
@@ -196,7 +200,7 @@ class FilterNode:
         out = None
         if why is None:
             out = self.stack.control(t, self._odom[-1][1], u_in)
-            if 1e3 * (time.perf_counter() - t_in) > self.budget_ms:
+            if self.budget_ms is not None and 1e3 * (time.perf_counter() - t_in) > self.budget_ms:
                 why = f"overrun ({1e3 * (time.perf_counter() - t_in):.1f} ms > {self.budget_ms:g} ms)"
         u = np.zeros(3) if why is not None else out.u_safe
         self._publish_cmd(u, stamp)

@@ -114,3 +114,24 @@ def test_filter_alone_filters_cmd_vel_in(domain_id):
     assert robot.cmds and robot.cmds[-1][1] < 0.6          # the CBF slowed the approach
     robot.n.close()
     node.node.close()
+
+
+def test_overrun_budget_is_real_time_only_unless_given(domain_id):
+    """The overrun valve's budget: T_C by default; in lock-step none (the twin's time waits for the answer), unless
+    --overrun-ms is given. A lock-step node with no budget answers a slow step with its command, not zero."""
+    stack = SafetyStack("big-cbf", default_stack_params())
+    made = []
+    for opts in (FilterOptions(), FilterOptions(lockstep=True), FilterOptions(lockstep=True, overrun_ms=20.0),
+                 FilterOptions(overrun_ms=20.0)):
+        made.append(FilterNode(transport.Node("filter", domain_id, loopback=True), stack, opts))
+    assert [n.budget_ms for n in made] == [pytest.approx(1e3 * stack.params.T_C_s), None, 20.0, 20.0]
+    lock = made[1]
+    lock.stack.set_goal(3.0, 0.0)
+    lock.stack.scan(_scan(0.0), RobotState(0.0, 0.0, 0.0))
+    lock._odom = [(0.0, RobotState(0.0, 0.0, 0.0))]
+    sent = []
+    lock._publish_cmd = lambda u, stamp: sent.append(tuple(u))
+    lock._step(0.0, convert.time_msg(0.0), None, time.perf_counter() - 10.0)     # a message 10 s old
+    assert sent[-1][0] > 0.05 and not lock.stats.zero_commands
+    for n in made:
+        n.node.close()
