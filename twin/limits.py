@@ -644,12 +644,12 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
                       lag_axes)
 
 
-def _choose_common_limit(weights: np.ndarray, groups: dict, full: dict, n_limits: int):
+def _choose_common_limit(weights: np.ndarray, groups: dict, full: dict):
     """The acceleration limit common to the axes and each axis's candidate at it, per weighting of the blocks
     (``_axis_search``). ``weights`` (R, B); ``groups[j][q]``: the candidate indices of axis j at limit q; ``full[j][q]``
     (K, B): their errors on axis j per block. The limit: the least geometric mean over the axes of each axis's best
     weighted error at it (as ``_best``); returns the limit's index (R,) and per axis the chosen candidate (R,)."""
-    R = len(weights)
+    R, n_limits = len(weights), len(next(iter(full.values())))
     score = np.zeros((R, n_limits))
     best = {j: np.zeros((R, n_limits), int) for j in groups}
     for j in groups:
@@ -705,14 +705,18 @@ def _axis_search(prob: DynamicProblem, L_base: np.ndarray, T_base: np.ndarray, a
     ax = np.flatnonzero(axes)
     groups = {j: [np.flatnonzero((which == j) & (acc_rows == aa)) for aa in accels] for j in ax}
     full = {j: [err[g][:, :, j] for g in groups[j]] for j in ax}          # (K, B) per axis and limit
-    q0, b0 = _choose_common_limit(np.ones((1, prob.nblocks)), groups, full, len(accels))
+    q0, b0 = _choose_common_limit(np.ones((1, prob.nblocks)), groups, full)
     a_best = float(accels[int(q0[0])])
-    _, picks_all = _choose_common_limit(W.astype(float), groups, full, len(accels))
+    _, picks_all = _choose_common_limit(W.astype(float), groups, full)
     for j in ax:
         best = int(b0[j][0])
         lat[j], lag_axes[j] = float(c.L[best, j]), float(c.T[best, j])
         picks = picks_all[j]
         half = c.L[picks, j] + c.T[picks, j] * np.log(2)
+        # the search is on a grid (dead time every ``step`` s): every resample can pick the same point, and the
+        # point itself is off the truth by up to half a step, which the resamples cannot show; so each end
+        # moves out by half a step (else a 90 % interval reads [0.050, 0.050]); the quantiles are those of a 90 %
+        # interval expanded for the few blocks (signals.expanded_levels: 2.1-97.9 % at 8 blocks)
         q = expanded_levels(0.90, prob.nblocks)
         ci[j] = np.quantile(half, q) - lag_axes[j] * np.log(2) + np.array([-0.5, 0.5]) * step
     return lat, lag_axes, ci, a_best

@@ -72,8 +72,8 @@ def _over_dds(quick: bool, method: str):
     domain = 200 + os.getpid() % 30
     dds = ["--ros2", "--loopback", "--lockstep", "--domain-id", str(domain)]
     filt = subprocess.Popen([sys.executable, "-c", ENTRY, "filter", *dds, "--method", method, "--seed", str(SEED),
-                             "--idle-exit", "1", "--overrun-ms", "50", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                             "--idle-exit", "1", "--overrun-ms", "50", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         sc = load_scenario(SCENARIO, SEED)
         ep = TwinEpisode.from_config(sc, None, SEED, RunConfig(), time_limit_s=6.0 if quick else None)
