@@ -46,7 +46,11 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    on a 2.5 ms grid (:func:`refine_dynamic`, dead time every 1.25 ms): on the 10 ms grid an acceleration-limited
    ramp can only start on a grid point, so a limited response's dead times came out in 10 ms steps. Each axis's
    delay to half a step (L + T ln 2: dead time and lag trade off, their sum is what a log pins down) gets a 5-95 %
-   interval by bootstrap over the calibration blocks (the error of each candidate summed per block).
+   interval by bootstrap over the calibration blocks (the error of each candidate summed per block). In that last
+   search the prediction is the mean over ``residual_draws`` draws (antithetic pairs) of a residual redrawn with
+   every command and added before the limits, its size per translation axis from the settled errors
+   (:func:`residual_sd`): behind an acceleration limit a residual adds its own wheel changes to every step's and
+   slows the ramps on average, which the noiseless model reads as dead time (docs/twin.md).
 
 The dead time L is the command-to-wheel latency (what the robot profile's latency_s is in the simulator); T and the
 acceleration limit are the response after it.
@@ -56,6 +60,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from bigcbf.control.jit import kernel
 
 from .execution import least_squares
 from .signals import expanded_levels
@@ -85,6 +91,8 @@ class LimitOptions:
     fine_span_s: float = 0.01           # ... within this of the coarse search's [s]
     fine_accel_rel: tuple[float, ...] = (0.97, 1.03)   # acceleration limits beside the coarse fit's that the
     #                                     fine search chooses among, point and resamples alike (relative; () none) [-]
+    residual_draws: int = 8             # the fine search's prediction: its mean over this many draws (antithetic
+    #                                     pairs) of a residual before the wheel limits (residual_sd; 0: none) [-]
 
 
 def rim_matrix(lever_m: float) -> np.ndarray:
@@ -448,6 +456,11 @@ class DynamicProblem:
     static: StaticFit
     h: float = 0.01
     avg_s: float = 0.0      # the odometry reports the mean twist over this span before its time [s]
+    #: (3,) standard deviation per axis of a residual redrawn with every command and added before the wheel limits
+    #: (``residual_sd``); None or zeros: the noiseless model
+    resid_sd: np.ndarray | None = None
+    resid_draws: int = 0    # draws of that residual the prediction averages over (LimitOptions.residual_draws)
+    resid_seed: int = 0
 
     def __post_init__(self):
         self.integral = _Integral(self.t_cmd, self.u_cmd)
@@ -465,15 +478,83 @@ class DynamicProblem:
         for mi, ni in zip(m, n):
             self._steps.setdefault(int(ni), []).append(int(mi))
 
+    def _residual_tables(self, cand: Candidates):
+        """The residual's draws and, per axis, for each grid step and unique dead time of ``cand``, the command in
+        force at the step's end and the fraction of the step it covers (the residual box-averaged over the step as
+        the commands are); None without a residual."""
+        if self.resid_sd is None or self.resid_draws <= 0 or not np.any(np.asarray(self.resid_sd) > 0):
+            return None
+        rng = np.random.default_rng(self.resid_seed)
+        half = rng.standard_normal(((self.resid_draws + 1) // 2, len(self.t_cmd), 3)) * np.asarray(self.resid_sd, float)
+        draws = np.concatenate([half, -half])          # antithetic pairs (an odd count gets one more): mean 0
+        axes = []
+        for j in range(3):
+            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
+            end = self.tg[:, None] - uniq[None, :]                              # (N, U)
+            k = np.clip(np.searchsorted(self.t_cmd, end, side="right") - 1, 0, len(self.t_cmd) - 1)
+            frac = np.clip((end - self.t_cmd[k]) / self.h, 0.0, 1.0)
+            frac = np.where(k > 0, frac, 1.0)
+            axes.append((k, frac, inv))
+        return draws, axes
+
     def simulate(self, cand: Candidates, keep: bool = False):
         """Run the candidates; returns the error per (candidate, block, axis) (C, B, 3), and with ``keep`` also the
         prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3)).
+        The loop is compiled (:func:`_simulate_kernel`); :meth:`simulate_reference` is the same model in numpy,
+        vectorised over the candidates (equal to rounding: ``tests/twin/test_twin_limits.py``)."""
+        C = len(cand)
+        st = self.static
+        kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
+        vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
+        tabs, invs = [], []
+        for j in range(3):
+            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
+            tabs.append(np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T)       # (N, U)
+            invs.append(inv)
+        U = max(tb.shape[1] for tb in tabs)
+        utab = np.zeros((3, len(self.tg), U))
+        for j, tb in enumerate(tabs):
+            utab[j, :, :tb.shape[1]] = tb
+        uinv = np.ascontiguousarray(np.column_stack(invs), dtype=np.int64)
+        T = cand.T if cand.T.ndim == 2 else cand.T[:, None]
+        alpha = np.ascontiguousarray(np.broadcast_to(np.where(T > 0, 1.0 - np.exp(-self.h / np.maximum(T, 1e-12)),
+                                                              1.0), (C, 3)))
+        room = np.asarray(cand.a * self.h, float)
+        v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
+        K = int(round(self.avg_s / self.h))
+        order = sorted(self._steps)
+        s_n = np.array([n for n in order for _ in self._steps[n]], np.int64)
+        s_m = np.array([m for n in order for m in self._steps[n]], np.int64)
+        s_f = np.array([(self.ts[m] - self.tg[n - 1]) / self.h for n in order for m in self._steps[n]], float)
+        wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
+        res = self._residual_tables(cand)
+        if res is None:
+            draws, rk, rf = np.zeros((0, 1, 3)), np.zeros((3, 1, 1), np.int64), np.zeros((3, 1, 1))
+        else:
+            draws, axes_tabs = res
+            rk = np.zeros((3, len(self.tg), U), np.int64)
+            rf = np.zeros((3, len(self.tg), U))
+            for j, (k, frac, _) in enumerate(axes_tabs):
+                rk[j, :, :k.shape[1]] = k
+                rf[j, :, :k.shape[1]] = frac
+        M = len(self.ts)
+        out = [np.zeros((C, M, 3)) if keep else np.zeros((0, 0, 3)) for _ in range(3)]
+        err = _simulate_kernel(utab, uinv, np.ascontiguousarray(st.A, float), np.asarray(st.d, float),
+                               np.asarray(kc, float), np.asarray(vmc, float), bool(np.isfinite(vmc).any()),
+                               bool(np.isfinite(cand.a).any()), room, alpha, v0, K, s_n, s_m, s_f,
+                               np.ascontiguousarray(self.vs, float), np.asarray(self.block, np.int64),
+                               np.asarray(wsc, float), self.nblocks, draws, rk, rf, keep, *out)
+        return (err, *out) if keep else err
+
+    def simulate_reference(self, cand: Candidates, keep: bool = False):
+        """:meth:`simulate` in numpy (the reference its compiled loop is tested against).
 
         Length: one vectorised time-stepping loop over all candidates: its state (x, y, the odometry-average buffer)
         carries from step to step; the setup above builds the tables the loop reads."""
         C = len(cand)
         st = self.static
         A, d = st.A, st.d
+        res = self._residual_tables(cand)         # None, or (draws (M, ncmd, 3), per axis (index, fraction) tables)
         kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
         vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
         # command box averages per unique delay and axis
@@ -488,6 +569,7 @@ class DynamicProblem:
         v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
         x = np.tile(v0, (C, 1))
         y = x.copy()
+        xr = np.broadcast_to(x, (len(res[0]), C, 3)).copy() if res is not None else None
         err = np.zeros((C, self.nblocks, 3))
         pred = np.zeros((C, len(self.ts), 3)) if keep else None
         targ = np.zeros((C, len(self.ts), 3)) if keep else None
@@ -505,17 +587,33 @@ class DynamicProblem:
                 table, inv = cols[j]
                 u[:, j] = table[n, inv]
             p = u @ A.T + d
-            if has_lim:
-                ap = np.abs(p)
-                D = ap[:, 0] + ap[:, 1] + kc * ap[:, 2]
-                p *= np.minimum(1.0, vmc / np.maximum(D, 1e-12))[:, None]
-            if has_a:
-                step = p - x
-                ast = np.abs(step)
-                rim = (ast[:, 0] + ast[:, 1] + kc * ast[:, 2])[:, None]
-                x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
+            if res is not None:                   # each draw's residual, (M, C, 3); the limits act on each draw
+                p = p + _residual_at(res, n)
+                if has_lim:
+                    ap = np.abs(p)
+                    D = ap[..., 0] + ap[..., 1] + kc * ap[..., 2]
+                    p = p * np.minimum(1.0, vmc / np.maximum(D, 1e-12))[..., None]
+                if has_a:
+                    step = p - xr
+                    ast = np.abs(step)
+                    rim = (ast[..., 0] + ast[..., 1] + kc * ast[..., 2])[..., None]
+                    xr = xr + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
+                else:
+                    xr = p
+                x = xr.mean(axis=0)                # the lag and the odometry's average are linear: on the mean
+                p = p.mean(axis=0)
             else:
-                x = p
+                if has_lim:
+                    ap = np.abs(p)
+                    D = ap[:, 0] + ap[:, 1] + kc * ap[:, 2]
+                    p *= np.minimum(1.0, vmc / np.maximum(D, 1e-12))[:, None]
+                if has_a:
+                    step = p - x
+                    ast = np.abs(step)
+                    rim = (ast[:, 0] + ast[:, 1] + kc * ast[:, 2])[:, None]
+                    x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
+                else:
+                    x = p
             y = y + (x - y) * alpha
             ya_prev = ya
             if K > 0:
@@ -536,6 +634,133 @@ class DynamicProblem:
                         targ[:, mi] = p
                         inp[:, mi] = u
         return (err, pred, targ, inp) if keep else err
+
+
+@kernel
+def _simulate_kernel(utab, uinv, A, d, kc, vmc, has_lim, has_a, room, alpha, v0, K, s_n, s_m, s_f, vs, block,
+                     wsc, nblocks, draws, rk, rf, keep, pred, targ, inp):
+    """:meth:`DynamicProblem.simulate`'s loop, one candidate after another (they are independent): ``utab`` (3, N,
+    U) the command box averages per axis and unique dead time, ``uinv`` (C, 3) each candidate's column; the scored
+    samples ``s_m`` at steps ``s_n`` (ascending) at fraction ``s_f`` of the step; ``draws`` (R, ncmd, 3) the
+    residual's draws (R = 0: none) with ``rk``, ``rf`` (3, N, U) the command in force at each step's end and the
+    fraction of the step it covers. Returns the error per (candidate, block, axis); fills ``pred``, ``targ``, ``inp``
+    (C, M, 3) with ``keep``.
+
+    Length: the model of the module docstring, step by step, in plain floats: the residual's draws (each through
+    the saturation and the acceleration limit), the lag, the odometry's average and the scoring."""
+    C = uinv.shape[0]
+    N = utab.shape[1]
+    R = draws.shape[0]
+    S = s_n.shape[0]
+    err = np.zeros((C, nblocks, 3))
+    u = np.empty(3)
+    p = np.empty(3)
+    x = np.empty(3)
+    y = np.empty(3)
+    ya = np.empty(3)
+    yp = np.empty(3)
+    xm = np.empty(3)
+    pm = np.empty(3)
+    xr = np.empty((max(R, 1), 3))
+    pr = np.empty(3)
+    buf = np.empty((K + 1, 3))
+    run = np.empty(3)
+    for c in range(C):
+        for j in range(3):
+            x[j] = v0[j]
+            y[j] = v0[j]
+            ya[j] = v0[j]
+            run[j] = 0.0
+            for r in range(R):
+                xr[r, j] = v0[j]
+            for b in range(K + 1):
+                buf[b, j] = v0[j]
+        for b in range(K + 1):
+            for j in range(3):
+                run[j] += buf[b, j]
+        head = 0
+        si = 0
+        for n in range(N):
+            for j in range(3):
+                u[j] = utab[j, n, uinv[c, j]]
+            for i in range(3):
+                p[i] = u[0] * A[i, 0] + u[1] * A[i, 1] + u[2] * A[i, 2] + d[i]
+            if R > 0:
+                for j in range(3):
+                    xm[j] = 0.0
+                    pm[j] = 0.0
+                for r in range(R):
+                    for j in range(3):
+                        kk = rk[j, n, uinv[c, j]]
+                        f = rf[j, n, uinv[c, j]]
+                        prev = draws[r, kk - 1, j] if kk > 0 else draws[r, 0, j]
+                        pr[j] = p[j] + (prev + (draws[r, kk, j] - prev) * f)
+                    _limit(pr, xr[r], kc[c], vmc[c], has_lim, has_a, room[c])
+                    for j in range(3):
+                        xm[j] += xr[r, j]
+                        pm[j] += pr[j]
+                for j in range(3):
+                    x[j] = xm[j] / R
+                    p[j] = pm[j] / R
+            else:
+                _limit(p, x, kc[c], vmc[c], has_lim, has_a, room[c])
+            for j in range(3):
+                y[j] = y[j] + (x[j] - y[j]) * alpha[c, j]
+                yp[j] = ya[j]
+            if K > 0:
+                for j in range(3):                  # the ring buffer: oldest out, y in
+                    old = buf[head, j]
+                    buf[head, j] = y[j]
+                    run[j] = run[j] - old + y[j]
+                head = (head + 1) % (K + 1)
+                for j in range(3):
+                    ya[j] = (run[j] - 0.5 * (buf[head, j] + y[j])) / K
+            else:
+                for j in range(3):
+                    ya[j] = y[j]
+            while si < S and s_n[si] == n:
+                mi = s_m[si]
+                f = s_f[si]
+                for j in range(3):
+                    yi = yp[j] + (ya[j] - yp[j]) * f
+                    e = (yi - vs[mi, j]) * wsc[j]
+                    err[c, block[mi], j] += e * e
+                    if keep:
+                        pred[c, mi, j] = yi
+                        targ[c, mi, j] = p[j]
+                        inp[c, mi, j] = u[j]
+                si += 1
+    return err
+
+
+@kernel
+def _limit(p, x, k, vm, has_lim, has_a, room):
+    """In place: ``p`` saturated (all wheels scaled together) and ``x`` moved toward it by the acceleration
+    limit's budget ``room`` (``x = p`` without one)."""
+    if has_lim:
+        D = abs(p[0]) + abs(p[1]) + k * abs(p[2])
+        s = min(1.0, vm / max(D, 1e-12))
+        for j in range(3):
+            p[j] = p[j] * s
+    if has_a:
+        rim = abs(p[0] - x[0]) + abs(p[1] - x[1]) + k * abs(p[2] - x[2])
+        s = min(1.0, room / max(rim, 1e-12))
+        for j in range(3):
+            x[j] = x[j] + (p[j] - x[j]) * s
+    else:
+        for j in range(3):
+            x[j] = p[j]
+
+
+def _residual_at(res, n: int) -> np.ndarray:
+    """(M, C, 3): each draw's residual box-averaged over grid step ``n`` at each candidate's dead times."""
+    draws, axes = res
+    out = np.empty((draws.shape[0], len(axes[0][2]), 3))
+    for j, (k, frac, inv) in enumerate(axes):
+        kn, fn = k[n, inv], frac[n, inv]
+        cur, prev = draws[:, kn, j], draws[:, np.maximum(kn - 1, 0), j]
+        out[:, :, j] = prev + (cur - prev) * fn
+    return out
 
 
 @dataclass
@@ -798,6 +1023,35 @@ def steady_samples(t: np.ndarray, v: np.ndarray, axes: np.ndarray, window_s: flo
     return out
 
 
+def residual_sd(t_cmd: np.ndarray, t: np.ndarray, err: np.ndarray, use: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(3,) standard deviation of the part of the model's error ``err`` (measured - predicted, (M, 3)) that changes
+    with each command and holds between commands, on the translation axes (0 on the yaw and on unidentified axes).
+
+    A residual held for one command period Tc, sampled as means over the odometry period P < Tc, has the
+    autocovariance sigma^2 (1 - P / Tc) between consecutive samples; noise that changes faster than P has about
+    none. So sigma^2 = the lag-one autocovariance of the samples in ``use`` / (1 - P / Tc). The yaw's is left at 0:
+    on a Mecanum base its settled error is the rollers' rocking after the wheels (sd 0.09 rad/s on the simulated X3
+    where its residual is <= 0.04), correlated over a sample too, and a residual in the yaw moves a ramp's rim
+    demand by only the lever (about 0.2 m) times it."""
+    sd = np.zeros(3)
+    if len(t) < 3 or len(t_cmd) < 2:
+        return sd
+    P, Tc = float(np.median(np.diff(t))), float(np.median(np.diff(t_cmd)))
+    if not (0 < P < Tc):
+        return sd
+    pair = use[:-1] & use[1:] & (np.diff(t) < 1.5 * P)
+    if pair.sum() < 20:
+        return sd
+    for j in (0, 1):
+        if not axes[j]:
+            continue
+        a, b = err[:-1, j][pair], err[1:, j][pair]
+        cov = float(np.mean((a - a.mean()) * (b - b.mean())))
+        var = float(np.var(err[use, j]))
+        sd[j] = np.sqrt(min(max(cov, 0.0) / (1.0 - P / Tc), var))
+    return sd
+
+
 def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_init: np.ndarray,
               settled_init: np.ndarray, opt: LimitOptions = LimitOptions(), min_settled: int = 100,
               avg_s: float = 0.0, rounds: int = 3) -> SaturatingModel:
@@ -840,7 +1094,9 @@ def fit_model(t_cmd, u_cmd, t, v, axes, cal: np.ndarray, block: np.ndarray, u_in
         if same and r >= 1:
             break
     if opt.fine_step_s < opt.step_s:
-        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.fine_step_s, avg_s)
+        sd = residual_sd(t_cmd, t, v - y, cal & settled, axes) if opt.residual_draws > 0 else None
+        prob = DynamicProblem(t_cmd, u_cmd, t, v, cal, block, axes, st, opt.fine_step_s, avg_s, sd,
+                              opt.residual_draws)
         dyn = refine_dynamic(prob, dyn, opt)
         y, s, u, scored, settled = predict(st, dyn, opt.fine_step_s)
     return SaturatingModel(st, dyn, y, s, u, settled, st.saturated(u) & scored, scored, st_use, st_u)

@@ -199,3 +199,91 @@ def test_fine_search_refines_the_acceleration_limit_with_the_dead_time():
         assert np.all(fine.latency_ci_s[:, 0] <= fine.latency_s) and np.all(fine.latency_s <= fine.latency_ci_s[:, 1])
         kept = refine_dynamic(DynamicProblem(*args, 0.0025, 0.02), given, LimitOptions(fine_accel_rel=()))
         assert kept.accel_max == pytest.approx(1.5 * off, rel=1e-12), off
+
+
+def _residual_drive(rmax: float, seed: int, accel: float = 1.5, dead_s: float = 0.100, lag_s: float = 0.015,
+                    h: float = 0.001):
+    """_limited_drive with the simulated firmware's residual: redrawn with every command, uniform in +-rmax on each
+    axis, added to the command before the wheel limits (bigcbf.sim.firmware.ImperfectionLayer)."""
+    from bigcbf.params.robot import RobotProfile
+    from bigcbf.sim.firmware import WheelLimiter
+    from twin.drive import calibration_program
+    t_cmd, u_cmd = calibration_program(40.0, seed=1)
+    r = np.random.default_rng(seed).uniform(-rmax, rmax, (len(t_cmd), 3))
+    tg = np.arange(0.0, t_cmd[-1] + 0.5, h)
+    k = np.searchsorted(t_cmd + dead_s, tg + 1e-12, side="right") - 1
+    lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=accel), 0.1645)
+    a = 1 - np.exp(-h / lag_s)
+    y, out = np.zeros(3), np.zeros((len(tg), 3))
+    for i in range(len(tg)):
+        y = y + (lim.update(tg[i], u_cmd[k[i]] + r[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * a
+        out[i] = y
+    ts = np.arange(0.5, tg[-1] - 0.1, 0.02)
+    c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h
+    return t_cmd, u_cmd, ts, (c[np.searchsorted(tg, ts - 1e-9)] - c[np.searchsorted(tg, ts - 0.02 - 1e-9)]) / 0.02
+
+
+def test_compiled_simulation_equals_the_numpy_reference():
+    """DynamicProblem.simulate (the compiled loop) against simulate_reference (numpy, vectorised over the
+    candidates): the same errors, predictions, targets and delayed commands to rounding, with the saturation, the
+    acceleration limit (and none), per-axis dead times and lags, the odometry's average, and the residual's draws."""
+    from twin.limits import Candidates, DynamicProblem, StaticFit
+    st = StaticFit(np.diag([0.9, 1.05, 0.95]), np.array([0.01, -0.02, 0.03]), 0.45, 0.1645, (0.1645, 0.1645), True,
+                   0.0, 0, 0.0, 0.0, np.eye(3), np.zeros(3))
+    t_cmd, u_cmd, ts, v = _residual_drive(0.03, seed=2)
+    v = v + np.random.default_rng(3).normal(0.0, [0.01, 0.01, 0.05], v.shape)
+    block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
+    rng = np.random.default_rng(4)
+    C = 12
+    cand = Candidates(rng.uniform(0.05, 0.15, (C, 3)), rng.choice([0.0, 0.02, 0.05], (C, 3)),
+                      rng.choice([1.2, 3.0, np.inf], C))
+    for h, sd, draws in ((0.01, None, 0), (0.0025, np.array([0.02, 0.01, 0.0]), 4)):
+        prob = DynamicProblem(t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), st, h, 0.02,
+                              sd, draws)
+        got, ref = prob.simulate(cand, keep=True), prob.simulate_reference(cand, keep=True)
+        np.testing.assert_allclose(got[0], ref[0], rtol=1e-10, atol=0)
+        for a, b in zip(got[1:], ref[1:]):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+        assert np.all(got[0] > 0)
+
+
+def test_residual_sd_of_a_held_residual_under_fast_noise():
+    """twin.limits.residual_sd by its model: a residual held for each 50 ms command (uniform +-0.03: sd 0.0173)
+    under noise that changes every 2 ms (sd 0.05 per 2 ms: 0.0158 in a 20-ms mean), seen as 20-ms means at 50 Hz:
+    the samples' own sd is 0.023 (both), the lag-one autocovariance / (1 - 20/50) gives the residual's within
+    10 %; the yaw's is 0 by design, and an axis that is not identified is 0."""
+    from twin.limits import residual_sd
+    rng = np.random.default_rng(5)
+    t_cmd = np.arange(0.0, 200.0, 0.05)
+    r = rng.uniform(-0.03, 0.03, (len(t_cmd), 3))
+    fine_t = np.arange(0.0, 200.0, 0.002)
+    fine = r[np.searchsorted(t_cmd, fine_t, side="right") - 1] + rng.normal(0.0, 0.05, (len(fine_t), 3))
+    means = fine.reshape(-1, 10, 3).mean(axis=1)                   # 20-ms means
+    t = fine_t.reshape(-1, 10)[:, -1]
+    use = np.ones(len(t), bool)
+    sd = residual_sd(t_cmd, t, means, use, np.ones(3, bool))
+    assert np.std(means[:, 0]) == pytest.approx(0.023, abs=0.001)
+    np.testing.assert_allclose(sd[:2], 0.03 / np.sqrt(3), rtol=0.10)
+    assert sd[2] == 0.0
+    assert residual_sd(t_cmd, t, means, use, np.array([True, False, True]))[1] == 0.0
+
+
+def test_residual_before_the_limit_reads_as_latency_unless_drawn():
+    """A residual redrawn with every command before the acceleration limit makes the ramps slower on average (it
+    adds its own wheel changes to every step's), which the noiseless model reads as dead time: on a 40-s drive
+    (1.5 m/s^2, 100 ms, residual +-0.04 m/s on every axis) the fine search's half-step delays read 12-15 ms late.
+    Averaging the prediction over 8 draws of the residual (its sd given) takes the mean error below half of that."""
+    from twin.limits import DynamicProblem, StaticFit, fit_dynamic, refine_dynamic
+    st = StaticFit(np.eye(3), np.zeros(3), None, 0.1645, (0.1645, 0.1645), True, 0.0, 0, 0.0, 0.0, np.eye(3),
+                   np.zeros(3))
+    t_cmd, u_cmd, ts, v = _residual_drive(0.04, seed=0)
+    block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
+    args = (t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), st)
+    dyn = fit_dynamic(DynamicProblem(*args, 0.01, 0.02))
+    truth = 0.100 + 0.015 * np.log(2)
+    errors = []
+    for sd, draws in ((None, 0), (np.full(3, 0.04 / np.sqrt(3)), 8)):
+        fine = refine_dynamic(DynamicProblem(*args, 0.0025, 0.02, sd, draws), dyn)
+        errors.append(fine.latency_s + fine.axis_lags_s * np.log(2) - truth)
+    assert np.all(errors[0] > 0.010)
+    assert np.mean(errors[1]) < 0.5 * np.mean(errors[0])
