@@ -478,142 +478,107 @@ class DynamicProblem:
         for mi, ni in zip(m, n):
             self._steps.setdefault(int(ni), []).append(int(mi))
 
-    def _residual_tables(self, cand: Candidates):
-        """The residual's draws and, per axis, for each grid step and unique dead time of ``cand``, the command in
-        force at the step's end and the fraction of the step it covers (the residual box-averaged over the step as
-        the commands are); None without a residual."""
+    def _tables(self, cand: Candidates):
+        """What the loop reads of the candidates' dead times, per axis, padded to the most unique ones (U): the
+        command box averages ``utab`` (3, N, U) and each candidate's column ``uinv`` (C, 3); the residual's draws
+        (R, ncmd, 3) (R = 0: none), and for them the command in force at each step's end ``rk`` and the fraction of
+        the step it covers ``rf`` (3, N, U) (the residual box-averaged over a step as the commands are)."""
+        cols = [np.unique(cand.L[:, j], return_inverse=True) for j in range(3)]
+        N, U = len(self.tg), max(len(uniq) for uniq, _ in cols)
+        utab = np.zeros((3, N, U))
+        for j, (uniq, _) in enumerate(cols):
+            utab[j, :, :len(uniq)] = np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T
+        uinv = np.ascontiguousarray(np.column_stack([inv for _, inv in cols]), dtype=np.int64)
         if self.resid_sd is None or self.resid_draws <= 0 or not np.any(np.asarray(self.resid_sd) > 0):
-            return None
+            return utab, uinv, np.zeros((0, 1, 3)), np.zeros((3, 1, 1), np.int64), np.zeros((3, 1, 1))
         rng = np.random.default_rng(self.resid_seed)
         half = rng.standard_normal(((self.resid_draws + 1) // 2, len(self.t_cmd), 3)) * np.asarray(self.resid_sd, float)
         draws = np.concatenate([half, -half])          # antithetic pairs (an odd count gets one more): mean 0
-        axes = []
-        for j in range(3):
-            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
-            end = self.tg[:, None] - uniq[None, :]                              # (N, U)
+        rk, rf = np.zeros((3, N, U), np.int64), np.zeros((3, N, U))
+        for j, (uniq, _) in enumerate(cols):
+            end = self.tg[:, None] - uniq[None, :]
             k = np.clip(np.searchsorted(self.t_cmd, end, side="right") - 1, 0, len(self.t_cmd) - 1)
-            frac = np.clip((end - self.t_cmd[k]) / self.h, 0.0, 1.0)
-            frac = np.where(k > 0, frac, 1.0)
-            axes.append((k, frac, inv))
-        return draws, axes
+            rk[j, :, :len(uniq)] = k
+            rf[j, :, :len(uniq)] = np.where(k > 0, np.clip((end - self.t_cmd[k]) / self.h, 0.0, 1.0), 1.0)
+        return utab, uinv, draws, rk, rf
+
+    def _constants(self, cand: Candidates):
+        """Per candidate: the yaw lever and rim-speed limit, the lag's step factor (C, 3) and the acceleration
+        limit's budget per step (C,); the state at the first step, the odometry's average in steps, the axes'
+        weights."""
+        C, st = len(cand), self.static
+        kc = np.asarray(cand.k if cand.k is not None else np.full(C, st.lever_m), float)
+        vmc = np.asarray(cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max),
+                         float)
+        T = cand.T if cand.T.ndim == 2 else cand.T[:, None]
+        alpha = np.ascontiguousarray(np.broadcast_to(np.where(T > 0, 1.0 - np.exp(-self.h / np.maximum(T, 1e-12)),
+                                                              1.0), (C, 3)))
+        room = np.asarray(cand.a * self.h, float)
+        v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
+        K = int(round(self.avg_s / self.h))            # the odometry's average: trapezoid over the last K steps
+        wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
+        return kc, vmc, alpha, room, v0, K, wsc
 
     def simulate(self, cand: Candidates, keep: bool = False):
         """Run the candidates; returns the error per (candidate, block, axis) (C, B, 3), and with ``keep`` also the
         prediction y, the saturated target s and the delayed command u at every scored sample (each (C, M, 3)).
         The loop is compiled (:func:`_simulate_kernel`); :meth:`simulate_reference` is the same model in numpy,
         vectorised over the candidates (equal to rounding: ``tests/twin/test_twin_limits.py``)."""
-        C = len(cand)
-        st = self.static
-        kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
-        vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
-        tabs, invs = [], []
-        for j in range(3):
-            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
-            tabs.append(np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T)       # (N, U)
-            invs.append(inv)
-        U = max(tb.shape[1] for tb in tabs)
-        utab = np.zeros((3, len(self.tg), U))
-        for j, tb in enumerate(tabs):
-            utab[j, :, :tb.shape[1]] = tb
-        uinv = np.ascontiguousarray(np.column_stack(invs), dtype=np.int64)
-        T = cand.T if cand.T.ndim == 2 else cand.T[:, None]
-        alpha = np.ascontiguousarray(np.broadcast_to(np.where(T > 0, 1.0 - np.exp(-self.h / np.maximum(T, 1e-12)),
-                                                              1.0), (C, 3)))
-        room = np.asarray(cand.a * self.h, float)
-        v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
-        K = int(round(self.avg_s / self.h))
+        C, st = len(cand), self.static
+        utab, uinv, draws, rk, rf = self._tables(cand)
+        kc, vmc, alpha, room, v0, K, wsc = self._constants(cand)
         order = sorted(self._steps)
         s_n = np.array([n for n in order for _ in self._steps[n]], np.int64)
         s_m = np.array([m for n in order for m in self._steps[n]], np.int64)
         s_f = np.array([(self.ts[m] - self.tg[n - 1]) / self.h for n in order for m in self._steps[n]], float)
-        wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
-        res = self._residual_tables(cand)
-        if res is None:
-            draws, rk, rf = np.zeros((0, 1, 3)), np.zeros((3, 1, 1), np.int64), np.zeros((3, 1, 1))
-        else:
-            draws, axes_tabs = res
-            rk = np.zeros((3, len(self.tg), U), np.int64)
-            rf = np.zeros((3, len(self.tg), U))
-            for j, (k, frac, _) in enumerate(axes_tabs):
-                rk[j, :, :k.shape[1]] = k
-                rf[j, :, :k.shape[1]] = frac
         M = len(self.ts)
         out = [np.zeros((C, M, 3)) if keep else np.zeros((0, 0, 3)) for _ in range(3)]
-        err = _simulate_kernel(utab, uinv, np.ascontiguousarray(st.A, float), np.asarray(st.d, float),
-                               np.asarray(kc, float), np.asarray(vmc, float), bool(np.isfinite(vmc).any()),
-                               bool(np.isfinite(cand.a).any()), room, alpha, v0, K, s_n, s_m, s_f,
-                               np.ascontiguousarray(self.vs, float), np.asarray(self.block, np.int64),
-                               np.asarray(wsc, float), self.nblocks, draws, rk, rf, keep, *out)
+        err = _simulate_kernel(utab, uinv, np.ascontiguousarray(st.A, float), np.asarray(st.d, float), kc, vmc,
+                               bool(np.isfinite(vmc).any()), bool(np.isfinite(cand.a).any()), room, alpha, v0, K,
+                               s_n, s_m, s_f, np.ascontiguousarray(self.vs, float), np.asarray(self.block, np.int64),
+                               wsc, self.nblocks, draws, rk, rf, keep, *out)
         return (err, *out) if keep else err
 
     def simulate_reference(self, cand: Candidates, keep: bool = False):
-        """:meth:`simulate` in numpy (the reference its compiled loop is tested against).
+        """:meth:`simulate` in numpy (the reference its compiled loop is tested against): the state of every
+        candidate (and of each of the residual's draws, a leading axis) steps together.
 
         Length: one vectorised time-stepping loop over all candidates: its state (x, y, the odometry-average buffer)
         carries from step to step; the setup above builds the tables the loop reads."""
-        C = len(cand)
-        st = self.static
+        C, st = len(cand), self.static
         A, d = st.A, st.d
-        res = self._residual_tables(cand)         # None, or (draws (M, ncmd, 3), per axis (index, fraction) tables)
-        kc = cand.k if cand.k is not None else np.full(C, st.lever_m)
-        vmc = cand.v_max if cand.v_max is not None else np.full(C, np.inf if st.v_max is None else st.v_max)
-        # command box averages per unique delay and axis
-        cols = []
-        for j in range(3):
-            uniq, inv = np.unique(cand.L[:, j], return_inverse=True)
-            table = np.array([self.integral.box(self.tg, self.h, L, j) for L in uniq]).T    # (N, U)
-            cols.append((np.ascontiguousarray(table), inv))
-        T = cand.T if cand.T.ndim == 2 else cand.T[:, None]
-        alpha = np.where(T > 0, 1.0 - np.exp(-self.h / np.maximum(T, 1e-12)), 1.0)
-        room = (cand.a * self.h)[:, None]
-        v0 = np.array([np.interp(self.tg[0], self.ts, self.vs[:, j]) for j in range(3)])
-        x = np.tile(v0, (C, 1))
-        y = x.copy()
-        xr = np.broadcast_to(x, (len(res[0]), C, 3)).copy() if res is not None else None
+        utab, uinv, draws, rk, rf = self._tables(cand)
+        kc, vmc, alpha, room, v0, K, wsc = self._constants(cand)
+        room = room[:, None]
+        R = len(draws)
+        y = np.tile(v0, (C, 1))
+        xs = np.broadcast_to(y, (R, C, 3)).copy() if R else y.copy()     # the limiter's state (per draw)
         err = np.zeros((C, self.nblocks, 3))
-        pred = np.zeros((C, len(self.ts), 3)) if keep else None
-        targ = np.zeros((C, len(self.ts), 3)) if keep else None
-        inp = np.zeros((C, len(self.ts), 3)) if keep else None
-        wsc = np.where(self.axes, 1.0 / self.scale, 0.0)
+        pred, targ, inp = (np.zeros((C, len(self.ts), 3)) for _ in range(3)) if keep else (None, None, None)
         has_lim = np.isfinite(vmc).any()
         has_a = np.isfinite(cand.a).any()
         u = np.empty((C, 3))
-        K = int(round(self.avg_s / self.h))            # the odometry's average: trapezoid over the last K steps
         buf = [y.copy() for _ in range(K + 1)] if K > 0 else None
         run = sum(buf) if K > 0 else None
         ya = y.copy()
         for n in range(len(self.tg)):
             for j in range(3):
-                table, inv = cols[j]
-                u[:, j] = table[n, inv]
+                u[:, j] = utab[j, n, uinv[:, j]]
             p = u @ A.T + d
-            if res is not None:                   # each draw's residual, (M, C, 3); the limits act on each draw
-                p = p + _residual_at(res, n)
-                if has_lim:
-                    ap = np.abs(p)
-                    D = ap[..., 0] + ap[..., 1] + kc * ap[..., 2]
-                    p = p * np.minimum(1.0, vmc / np.maximum(D, 1e-12))[..., None]
-                if has_a:
-                    step = p - xr
-                    ast = np.abs(step)
-                    rim = (ast[..., 0] + ast[..., 1] + kc * ast[..., 2])[..., None]
-                    xr = xr + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
-                else:
-                    xr = p
-                x = xr.mean(axis=0)                # the lag and the odometry's average are linear: on the mean
-                p = p.mean(axis=0)
+            if R:                                 # each draw's residual, (R, C, 3); the limits act on each draw
+                p = p + _residual_at(draws, rk, rf, uinv, n)
+            if has_lim:
+                ap = np.abs(p)
+                D = ap[..., 0] + ap[..., 1] + kc * ap[..., 2]
+                p = p * np.minimum(1.0, vmc / np.maximum(D, 1e-12))[..., None]
+            if has_a:
+                step = p - xs
+                ast = np.abs(step)
+                rim = (ast[..., 0] + ast[..., 1] + kc * ast[..., 2])[..., None]
+                xs = xs + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
             else:
-                if has_lim:
-                    ap = np.abs(p)
-                    D = ap[:, 0] + ap[:, 1] + kc * ap[:, 2]
-                    p *= np.minimum(1.0, vmc / np.maximum(D, 1e-12))[:, None]
-                if has_a:
-                    step = p - x
-                    ast = np.abs(step)
-                    rim = (ast[:, 0] + ast[:, 1] + kc * ast[:, 2])[:, None]
-                    x = x + step * np.minimum(1.0, room / np.maximum(rim, 1e-12))
-                else:
-                    x = p
+                xs = p
+            x, p = (xs.mean(axis=0), p.mean(axis=0)) if R else (xs, p)   # the lag and the average are linear
             y = y + (x - y) * alpha
             ya_prev = ya
             if K > 0:
@@ -752,12 +717,12 @@ def _limit(p, x, k, vm, has_lim, has_a, room):
             x[j] = p[j]
 
 
-def _residual_at(res, n: int) -> np.ndarray:
-    """(M, C, 3): each draw's residual box-averaged over grid step ``n`` at each candidate's dead times."""
-    draws, axes = res
-    out = np.empty((draws.shape[0], len(axes[0][2]), 3))
-    for j, (k, frac, inv) in enumerate(axes):
-        kn, fn = k[n, inv], frac[n, inv]
+def _residual_at(draws, rk, rf, uinv, n: int) -> np.ndarray:
+    """(R, C, 3): each draw's residual box-averaged over grid step ``n`` at each candidate's dead times
+    (:meth:`DynamicProblem._tables`)."""
+    out = np.empty((draws.shape[0], uinv.shape[0], 3))
+    for j in range(3):
+        kn, fn = rk[j, n, uinv[:, j]], rf[j, n, uinv[:, j]]
         cur, prev = draws[:, kn, j], draws[:, np.maximum(kn - 1, 0), j]
         out[:, :, j] = prev + (cur - prev) * fn
     return out

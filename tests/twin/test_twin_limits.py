@@ -137,21 +137,24 @@ def test_expanded_percentile_levels_by_hand():
     assert expanded_levels(0.90, 40)[0] == pytest.approx(0.0440, abs=2e-4)
 
 
-def _limited_drive(dead_s: float, accel: float = 1.5, lag_s: float = 0.015, h: float = 0.001):
+def _limited_drive(dead_s: float, accel: float = 1.5, lag_s: float = 0.015, h: float = 0.001, rmax: float = 0.0,
+                   seed: int = 0):
     """A synthetic robot behind the simulated firmware's acceleration limit (bigcbf.sim.firmware.WheelLimiter,
     continuous in time) with a first-order wheel lag and 20-ms averaged odometry at 50 Hz, driven by 40 s of the
-    calibration program; no noise."""
+    calibration program; no noise but, with ``rmax``, the firmware's residual: redrawn with every command, uniform
+    in +-rmax on each axis, added to the command before the wheel limits (bigcbf.sim.firmware.ImperfectionLayer)."""
     from bigcbf.params.robot import RobotProfile
     from bigcbf.sim.firmware import WheelLimiter
     from twin.drive import calibration_program
     t_cmd, u_cmd = calibration_program(40.0, seed=1)
+    r = np.random.default_rng(seed).uniform(-rmax, rmax, (len(t_cmd), 3)) if rmax > 0 else np.zeros((len(t_cmd), 3))
     tg = np.arange(0.0, t_cmd[-1] + 0.5, h)
     k = np.searchsorted(t_cmd + dead_s, tg + 1e-12, side="right") - 1
     lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=accel), 0.1645)
     a = 1 - np.exp(-h / lag_s)
     y, out = np.zeros(3), np.zeros((len(tg), 3))
     for i in range(len(tg)):
-        y = y + (lim.update(tg[i], u_cmd[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * a
+        y = y + (lim.update(tg[i], u_cmd[k[i]] + r[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * a
         out[i] = y
     ts = np.arange(0.5, tg[-1] - 0.1, 0.02)
     c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h
@@ -201,28 +204,6 @@ def test_fine_search_refines_the_acceleration_limit_with_the_dead_time():
         assert kept.accel_max == pytest.approx(1.5 * off, rel=1e-12), off
 
 
-def _residual_drive(rmax: float, seed: int, accel: float = 1.5, dead_s: float = 0.100, lag_s: float = 0.015,
-                    h: float = 0.001):
-    """_limited_drive with the simulated firmware's residual: redrawn with every command, uniform in +-rmax on each
-    axis, added to the command before the wheel limits (bigcbf.sim.firmware.ImperfectionLayer)."""
-    from bigcbf.params.robot import RobotProfile
-    from bigcbf.sim.firmware import WheelLimiter
-    from twin.drive import calibration_program
-    t_cmd, u_cmd = calibration_program(40.0, seed=1)
-    r = np.random.default_rng(seed).uniform(-rmax, rmax, (len(t_cmd), 3))
-    tg = np.arange(0.0, t_cmd[-1] + 0.5, h)
-    k = np.searchsorted(t_cmd + dead_s, tg + 1e-12, side="right") - 1
-    lim = WheelLimiter(RobotProfile(wheel_accel_max_mps2=accel), 0.1645)
-    a = 1 - np.exp(-h / lag_s)
-    y, out = np.zeros(3), np.zeros((len(tg), 3))
-    for i in range(len(tg)):
-        y = y + (lim.update(tg[i], u_cmd[k[i]] + r[k[i]] if k[i] >= 0 else np.zeros(3), h) - y) * a
-        out[i] = y
-    ts = np.arange(0.5, tg[-1] - 0.1, 0.02)
-    c = np.vstack([np.zeros(3), np.cumsum(out, axis=0)]) * h
-    return t_cmd, u_cmd, ts, (c[np.searchsorted(tg, ts - 1e-9)] - c[np.searchsorted(tg, ts - 0.02 - 1e-9)]) / 0.02
-
-
 def test_compiled_simulation_equals_the_numpy_reference():
     """DynamicProblem.simulate (the compiled loop) against simulate_reference (numpy, vectorised over the
     candidates): the same errors, predictions, targets and delayed commands to rounding, with the saturation, the
@@ -230,7 +211,7 @@ def test_compiled_simulation_equals_the_numpy_reference():
     from twin.limits import Candidates, DynamicProblem, StaticFit
     st = StaticFit(np.diag([0.9, 1.05, 0.95]), np.array([0.01, -0.02, 0.03]), 0.45, 0.1645, (0.1645, 0.1645), True,
                    0.0, 0, 0.0, 0.0, np.eye(3), np.zeros(3))
-    t_cmd, u_cmd, ts, v = _residual_drive(0.03, seed=2)
+    t_cmd, u_cmd, ts, v = _limited_drive(0.100, rmax=0.03, seed=2)
     v = v + np.random.default_rng(3).normal(0.0, [0.01, 0.01, 0.05], v.shape)
     block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
     rng = np.random.default_rng(4)
@@ -276,7 +257,7 @@ def test_residual_before_the_limit_reads_as_latency_unless_drawn():
     from twin.limits import DynamicProblem, StaticFit, fit_dynamic, refine_dynamic
     st = StaticFit(np.eye(3), np.zeros(3), None, 0.1645, (0.1645, 0.1645), True, 0.0, 0, 0.0, 0.0, np.eye(3),
                    np.zeros(3))
-    t_cmd, u_cmd, ts, v = _residual_drive(0.04, seed=0)
+    t_cmd, u_cmd, ts, v = _limited_drive(0.100, rmax=0.04, seed=0)
     block = np.minimum(((ts - ts[0]) / (ts[-1] - ts[0]) * 6).astype(int), 5)
     args = (t_cmd, u_cmd, ts, v, np.ones(len(ts), bool), block, np.ones(3, bool), st)
     dyn = fit_dynamic(DynamicProblem(*args, 0.01, 0.02))
