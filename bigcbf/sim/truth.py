@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ..control.jit import kernel
 from ..perception.ground_truth import ground_truth_obstacles, rectangle_segments
 from ..types import Obstacles
 from .scene import OBSTACLE_CONTACT, SceneSpec
@@ -240,6 +241,23 @@ class Clearance:
         """(``self(pose, ped_p, below)``, a lower bound on the exact minimum): the value itself when it is exact,
         else what the pruning proved (every obstacle not measured is at least that far). The bound holds where
         it is >= 0 (the centre-distance bounds assume the bodies apart; a deep overlap can be deeper).
+        ``static``, ``pedestrians``: False leaves those obstacles out (the minimum over the others).
+
+        Compiled (``_bounded_kernel``, issue 26: the episode calls it after every physics block where the motion
+        bound does not settle the value): :meth:`bounded_reference`'s operations in its order, the same bits
+        (tests/sim/test_sim_fastpaths.py)."""
+        o = self.outline
+        ped_p = np.asarray(ped_p, float).reshape(-1, 2)
+        return _bounded_kernel(float(pose[0]), float(pose[1]), float(pose[2]), o.cx, o.cy, o.half_x, o.half_y,
+                               o.outer_radius, o.inner_radius, self.rect_c, self.rect_h, self.rect_cos,
+                               self.rect_sin, self.circ_c, self.circ_r, ped_p, self.ped_r, float(below),
+                               bool(static), bool(pedestrians))
+
+    def bounded_reference(self, pose, ped_p: np.ndarray, below: float = math.inf, static: bool = True,
+                          pedestrians: bool = True) -> tuple[float, float]:
+        """(``self(pose, ped_p, below)``, a lower bound on the exact minimum): the value itself when it is exact,
+        else what the pruning proved (every obstacle not measured is at least that far). The bound holds where
+        it is >= 0 (the centre-distance bounds assume the bodies apart; a deep overlap can be deeper).
         ``static``, ``pedestrians``: False leaves those obstacles out (the minimum over the others)."""
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
         o = self.outline
@@ -278,6 +296,99 @@ class Clearance:
             best = min(best, v)
         return best, min(best, limit - outer)       # those not measured: beyond `limit` or behind the break
 
+
+
+@kernel
+def _rect_rect_one(ax, ay, ac, as_, ahx, ahy, bx, by, bc, bs, bhx, bhy):
+    """:func:`rect_rect_distance_one` compiled (the same operations in the same order)."""
+    dx, dy = bx - ax, by - ay
+    depth = math.inf
+    apart = False
+    for k in range(4):
+        if k == 0:
+            ux, uy = ac, as_
+        elif k == 1:
+            ux, uy = -as_, ac
+        elif k == 2:
+            ux, uy = bc, bs
+        else:
+            ux, uy = -bs, bc
+        ra = ahx * abs(ux * ac + uy * as_) + ahy * abs(uy * ac - ux * as_)
+        rb = bhx * abs(ux * bc + uy * bs) + bhy * abs(uy * bc - ux * bs)
+        overlap = ra + rb - abs(ux * dx + uy * dy)
+        if overlap <= 0.0:
+            apart = True
+            break
+        depth = min(depth, overlap)
+    if not apart:
+        return -depth
+    gap = math.inf
+    for side in range(2):
+        if side == 0:
+            cx, cy, c, sn, hx, hy = ax, ay, ac, as_, ahx, ahy
+            ox, oy, oc, osn, ohx, ohy = bx, by, bc, bs, bhx, bhy
+        else:
+            cx, cy, c, sn, hx, hy = bx, by, bc, bs, bhx, bhy
+            ox, oy, oc, osn, ohx, ohy = ax, ay, ac, as_, ahx, ahy
+        for corner in range(4):
+            sx = 1.0 if corner == 0 or corner == 3 else -1.0
+            sy = 1.0 if corner <= 1 else -1.0
+            px = cx + c * sx * hx - sn * sy * hy - ox
+            py = cy + sn * sx * hx + c * sy * hy - oy
+            qx = abs(oc * px + osn * py) - ohx
+            qy = abs(oc * py - osn * px) - ohy
+            gap = min(gap, math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0))
+    return max(gap, 0.0)
+
+
+@kernel
+def _bounded_kernel(x, y, yaw, ocx, ocy, half_x, half_y, outer, inner, rect_c, rect_h, rect_cos, rect_sin, circ_c,
+                    circ_r, ped_c, ped_r, below, static, pedestrians):
+    """:meth:`Clearance.bounded_reference` compiled: (value, lower bound). The candidates (centre-to-surface
+    distance d <= limit) are measured in the order of sorted (d, group, index) tuples: a stable sort by d of the
+    candidates listed group by group, index by index."""
+    nr = rect_c.shape[0] if static else 0
+    nc = circ_c.shape[0] if static else 0
+    npd = ped_c.shape[0] if pedestrians else 0
+    n = nr + nc + npd
+    if n == 0:
+        return math.inf, math.inf
+    d = np.empty(n)
+    for i in range(nr):                    # rect_distances: the point's distance to each wall and box
+        ex, ey = x - rect_c[i, 0], y - rect_c[i, 1]
+        lx = rect_cos[i] * ex + rect_sin[i] * ey
+        ly = -rect_sin[i] * ex + rect_cos[i] * ey
+        qx = max(abs(lx) - rect_h[i, 0], 0.0)
+        qy = max(abs(ly) - rect_h[i, 1], 0.0)
+        d[i] = np.hypot(qx, qy)
+    for i in range(nc):
+        d[nr + i] = np.hypot(circ_c[i, 0] - x, circ_c[i, 1] - y) - circ_r[i]
+    for i in range(npd):
+        d[nr + nc + i] = np.hypot(ped_c[i, 0] - x, ped_c[i, 1] - y) - ped_r[i]
+    lowest = d.min()
+    if lowest - outer >= below:            # everything surely at least `below` away
+        return lowest - outer, lowest - outer
+    limit = min(below, lowest - inner) + outer
+    cand = np.flatnonzero(d <= limit)
+    order = cand[np.argsort(d[cand], kind="mergesort")]
+    cs, sn = math.cos(yaw), math.sin(yaw)
+    cx, cy = x + cs * ocx - sn * ocy, y + sn * ocx + cs * ocy
+    best = math.inf
+    for k in order:
+        if d[k] - outer >= best:
+            break
+        if k < nr:
+            v = _rect_rect_one(cx, cy, cs, sn, half_x, half_y, rect_c[k, 0], rect_c[k, 1], rect_cos[k], rect_sin[k],
+                               rect_h[k, 0], rect_h[k, 1])
+        else:
+            if k < nr + nc:
+                px, py, r = circ_c[k - nr, 0] - cx, circ_c[k - nr, 1] - cy, circ_r[k - nr]
+            else:
+                px, py, r = ped_c[k - nr - nc, 0] - cx, ped_c[k - nr - nc, 1] - cy, ped_r[k - nr - nc]
+            qx, qy = abs(cs * px + sn * py) - half_x, abs(cs * py - sn * px) - half_y
+            v = math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0) - r
+        best = min(best, v)
+    return best, min(best, limit - outer)
 
 class GroundTruth:
     """The simulator's truth for one episode: clearance (``Clearance``), contact (MuJoCo's), truth-mode obstacles."""
