@@ -146,7 +146,10 @@ class FreeSpace:
         runs, start = {}, 0
         for k in ext:
             n = len(clusters[k].idx)
-            runs[k] = _runs(free[start:start + n], sp.xy[clusters[k].idx], pr)
+            runs[k] = [(int(lo), int(hi)) for lo, hi in _runs_kernel(free[start:start + n],
+                                                                    np.ascontiguousarray(sp.xy[clusters[k].idx]),
+                                                                    int(pr.min_points),
+                                                                    float(pr.compact_max_extent_m))]
             start += n
         if not any(runs.values()):
             return clusters, is_compact
@@ -197,3 +200,31 @@ def _runs(free: np.ndarray, pts: np.ndarray, pr: PerceptionParams) -> list[tuple
             runs.append((lo, hi))
         i = hi
     return runs
+
+
+@kernel
+def _runs_kernel(free, pts, min_points, max_extent):
+    """:func:`_runs` compiled: (K, 2) int64 rows [lo, hi) (the extent as numpy's hypot of the ends' difference)."""
+    n = free.shape[0]
+    out = np.empty((n, 2), np.int64)
+    k = 0
+    i = 0
+    while i < n:
+        if not free[i]:
+            i += 1
+            continue
+        lo, hi, count = i, i + 1, 1
+        j = i + 1
+        while j < n:
+            if free[j]:
+                hi, count = j + 1, count + 1
+                j += 1
+            elif j + 1 < n and free[j + 1]:
+                j += 1                                     # bridge one point
+            else:
+                break
+        if count >= min_points and np.hypot(pts[hi - 1, 0] - pts[lo, 0], pts[hi - 1, 1] - pts[lo, 1]) <= max_extent:
+            out[k, 0], out[k, 1] = lo, hi
+            k += 1
+        i = hi
+    return out[:k]

@@ -525,7 +525,7 @@ class Tracker:
         measured = self.last_hit >= (self.t if self.t is not None else 0.0) - 1e-9
         circle = self.confirmed & (~self.static | self.is_round())
         idx = np.flatnonzero(circle)
-        order = idx[np.argsort(self.surface_distance(robot_xy)[idx], kind="stable")]
+        order = _nearest_first(idx, self.x, self.r, float(robot_xy[0]), float(robot_xy[1]))
         order, beyond = order[: pr.max_tracks], order[pr.max_tracks:]
         as_points = np.zeros(len(self), bool)
         as_points[beyond] = True
@@ -544,3 +544,15 @@ class Tracker:
         """The circles of :meth:`report`."""
         return self.report(robot_xy)[0]
 
+
+@kernel
+def _nearest_first(idx, x, r, rx, ry):
+    """``idx[np.argsort(surface_distance(robot)[idx], kind="stable")]`` compiled (:meth:`Tracker.report`): the
+    tracks ``idx`` by their surface distance |p - robot| - r (numpy's 2-norm of a pair: sqrt(dx dx + dy dy)),
+    ties in ``idx``'s order."""
+    d = np.empty(idx.shape[0])
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        dx, dy = x[i, 0] - rx, x[i, 1] - ry
+        d[k] = math.sqrt(dx * dx + dy * dy) - r[i]
+    return idx[np.argsort(d, kind="mergesort")]

@@ -89,3 +89,20 @@ def test_compiled_prediction_matches_kf_predict():
         _predict_tracks(xc, Pc, F, Q)
         np.testing.assert_allclose(xc, xr, rtol=1e-13, atol=1e-14)
         np.testing.assert_allclose(Pc, Pr, rtol=1e-12, atol=1e-14)
+
+
+def test_nearest_first_is_numpys_stable_argsort():
+    """tracker._nearest_first (issue 26) orders tracks as idx[argsort(|p - robot| - r, stable)] did, ties in idx's
+    order (two tracks at the same surface distance)."""
+    from bigcbf.perception.tracker import _nearest_first
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        n = int(rng.integers(0, 12))
+        x = rng.uniform(-5, 5, (n, 4))
+        r = rng.uniform(0, 0.5, n)
+        if n >= 2:
+            x[1, :2], r[1] = x[0, :2], r[0]                # a tie
+        idx = np.flatnonzero(rng.random(n) < 0.7)
+        robot = rng.uniform(-1, 1, 2)
+        ref = idx[np.argsort((np.linalg.norm(x[:, :2] - robot, axis=1) - r)[idx], kind="stable")]
+        assert np.array_equal(_nearest_first(idx, x, r, float(robot[0]), float(robot[1])), ref)
