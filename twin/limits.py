@@ -40,9 +40,12 @@ Identification (:func:`fit_static`, :func:`fit_dynamic`):
    axis has its own noise variance, :func:`_best`): a plain sum let the noisiest axis choose them for all (on
    the simulated X3 the yaw rate's error, rocked by the rollers, was 12 times the others' and chose a 50 ms lag
    with a 45 ms dead time for vx, whose own best is 85 ms and 13 ms). An acceleration limit is reported when it
-   lowers that error by ``accel_gain`` against none. The yaw lever is then chosen among
-   those the static part leaves plausible (within 25 noise variances of its best), by the transients: how fast a
-   combined step ramps depends on it. Finally each axis's dead time and lag are searched again near their values
+   lowers that error by ``accel_gain`` against none. The yaw lever is the static part's: choosing it again among
+   those the static part leaves plausible by the transients (``lever_by_transients``, off by default) traded the
+   lever against the yaw's own dead time, since that choice is made at a dead time common to the axes: a yaw that
+   responds later than the translation read as a shorter lever (0.05-0.15 m for the simulated base's 0.1645 m), and
+   its dead time then came out up to 46 ms off. On 50 dev profiles (seed 5101) the static lever gave the yaw
+   latency a z-score spread of 0.94 against 1.57 (docs/twin.md). Finally each axis's dead time and lag are searched again near their values
    on a 2.5 ms grid (:func:`refine_dynamic`, dead time every 1.25 ms): on the 10 ms grid an acceleration-limited
    ramp can only start on a grid point, so a limited response's dead times came out in 10 ms steps. Each axis's
    delay to half a step (L + T ln 2: dead time and lag trade off, their sum is what a log pins down) gets a 5-95 %
@@ -93,6 +96,8 @@ class LimitOptions:
     #                                     fine search chooses among, point and resamples alike (relative; () none) [-]
     residual_draws: int = 8             # the fine search's prediction: its mean over this many draws (antithetic
     #                                     pairs) of a residual before the wheel limits (residual_sd; 0: none) [-]
+    lever_by_transients: bool = False   # step 3b: the yaw lever re-chosen among the plausible ones by the
+    #                                     transients at a common dead time (False: the static fit's lever) [-]
 
 
 def rim_matrix(lever_m: float) -> np.ndarray:
@@ -803,7 +808,7 @@ def fit_dynamic(prob: DynamicProblem, opt: LimitOptions = LimitOptions(), seed: 
         L0, T0, a0, best_cost = float(c3.L[j, 0]), float(c3.T[j]), np.inf, cost_none
     # 3b. the yaw lever among those the static limit allows (a combined step's ramp depends on it)
     lever = None
-    levers = prob.static.plausible_levers()
+    levers = prob.static.plausible_levers() if opt.lever_by_transients else np.array([prob.static.lever_m])
     if len(levers) > 1:
         vms = np.array([prob.static.at_lever(k).v_max for k in levers])
         La = np.clip(L0 + np.array([-0.01, -0.005, 0.0, 0.005, 0.01]), 0.0, opt.max_delay_s)
