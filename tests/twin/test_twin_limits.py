@@ -268,3 +268,24 @@ def test_residual_before_the_limit_reads_as_latency_unless_drawn():
         errors.append(fine.latency_s + fine.axis_lags_s * np.log(2) - truth)
     assert np.all(errors[0] > 0.010)
     assert np.mean(errors[1]) < 0.5 * np.mean(errors[0])
+
+
+def test_the_yaw_lever_is_the_static_fits():
+    """A recorded drive (tests/data/README.md, lever_drive.npz: a 0.36 m/s rim limit behind a 0.96 m/s^2 ramp) whose
+    yaw answers about 50 ms before its translation. Re-choosing the lever by the transients at a dead time common
+    to the axes (``lever_by_transients``, the old step 3b) reads it as the grid's 0.05 m and the yaw's half-step delay
+    49 ms late; the static fit's lever (the default) is within 2.5 cm of the base's 0.1645 m and the yaw's delay within
+    15 ms of the truth (0.125 s)."""
+    from twin.limits import LimitOptions, fit_model
+    d = np.load(Path(__file__).parents[1] / "data" / "lever_drive.npz")
+    args = [d[k] for k in ("t_cmd", "u_cmd", "t", "v", "axes", "cal", "block", "u_init", "settled_init")]
+    kw = dict(min_settled=int(d["min_settled"]), avg_s=float(d["avg_s"]))
+    half = {}
+    for on in (False, True):
+        m = fit_model(*args, LimitOptions(lever_by_transients=on), **kw)
+        half[on] = (m.dynamic.latency_s + m.dynamic.axis_lags_s * np.log(2), m.static.lever_m)
+    assert half[False][1] == pytest.approx(0.1645, abs=0.025)
+    assert half[False][0][2] == pytest.approx(0.125, abs=0.015)
+    np.testing.assert_allclose(half[False][0][:2], [0.177, 0.180], atol=0.01)
+    # the fixture exercises the failure: the lever by the transients is far off, and the yaw with it
+    assert half[True][1] < 0.1 and half[True][0][2] > 0.125 + 0.035
