@@ -146,10 +146,8 @@ class FreeSpace:
         runs, start = {}, 0
         for k in ext:
             n = len(clusters[k].idx)
-            runs[k] = [(int(lo), int(hi)) for lo, hi in _runs_kernel(free[start:start + n],
-                                                                    np.ascontiguousarray(sp.xy[clusters[k].idx]),
-                                                                    int(pr.min_points),
-                                                                    float(pr.compact_max_extent_m))]
+            runs[k] = _runs(free[start:start + n], np.ascontiguousarray(sp.xy[clusters[k].idx]), int(pr.min_points),
+                            float(pr.compact_max_extent_m)).tolist()
             start += n
         if not any(runs.values()):
             return clusters, is_compact
@@ -176,35 +174,11 @@ class FreeSpace:
         return out, np.array(flags, bool)
 
 
-def _runs(free: np.ndarray, pts: np.ndarray, pr: PerceptionParams) -> list[tuple[int, int]]:
-    """[lo, hi) runs of ``free`` points (in scan order; one missing point bridged) with at least min_points free
-    points and at most compact_max_extent_m between their ends."""
-    runs = []
-    n = len(free)
-    i = 0
-    while i < n:
-        if not free[i]:
-            i += 1
-            continue
-        lo, hi, count = i, i + 1, 1
-        j = i + 1
-        while j < n:
-            if free[j]:
-                hi, count = j + 1, count + 1
-                j += 1
-            elif j + 1 < n and free[j + 1]:
-                j += 1                                     # bridge one point
-            else:
-                break
-        if count >= pr.min_points and float(np.hypot(*(pts[hi - 1] - pts[lo]))) <= pr.compact_max_extent_m:
-            runs.append((lo, hi))
-        i = hi
-    return runs
-
-
 @kernel
-def _runs_kernel(free, pts, min_points, max_extent):
-    """:func:`_runs` compiled: (K, 2) int64 rows [lo, hi) (the extent as numpy's hypot of the ends' difference)."""
+def _runs(free, pts, min_points, max_extent):
+    """(K, 2) int64 rows [lo, hi): the runs of ``free`` points (in scan order; one missing point bridged) with at least
+    ``min_points`` free points and at most ``max_extent`` [m] between their ends (numpy's hypot of the ends'
+    difference)."""
     n = free.shape[0]
     out = np.empty((n, 2), np.int64)
     k = 0

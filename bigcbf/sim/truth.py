@@ -136,13 +136,14 @@ def rect_rect_distance(a_c, a_h, a_yaw: float, b_c: np.ndarray, b_h: np.ndarray,
     return np.where(depth > 0, -depth, np.maximum(gap, 0.0))
 
 
+@kernel
 def rect_rect_distance_one(ax: float, ay: float, ac: float, as_: float, ahx: float, ahy: float, bx: float,
                            by: float, bc: float, bs: float, bhx: float, bhy: float) -> float:
     """``rect_rect_distance`` for one pair, in plain floats (the episode measures a few rectangles every 10 ms,
     where numpy's per-call overhead dominated): rectangle A with centre (ax, ay), yaw given by (ac, as_) = (cos,
     sin) and half sizes (ahx, ahy), rectangle B likewise. Centred rectangles project onto a unit axis u as
     intervals of half-length hx |u.e1| + hy |u.e2| about their centres, so their overlap on u is
-    r_A + r_B - |u.(c_B - c_A)|."""
+    r_A + r_B - |u.(c_B - c_A)|. Compiled (``_bounded_kernel`` calls it; float arguments)."""
     dx, dy = bx - ax, by - ay
     depth = math.inf
     for ux, uy in ((ac, as_), (-as_, ac), (bc, bs), (-bs, bc)):
@@ -244,7 +245,8 @@ class Clearance:
         ``static``, ``pedestrians``: False leaves those obstacles out (the minimum over the others).
 
         Compiled (``_bounded_kernel``, issue 26: the episode calls it after every physics block where the motion
-        bound does not settle the value): :meth:`bounded_reference`'s operations in its order, the same bits
+        bound does not settle the value): :meth:`bounded_reference`'s operations in its order, the same bits but
+        where a circle's distance goes through the C library's hypot instead of CPython's ``math.hypot``
         (tests/sim/test_sim_fastpaths.py)."""
         o = self.outline
         ped_p = np.asarray(ped_p, float).reshape(-1, 2)
@@ -287,8 +289,9 @@ class Clearance:
             c, _, r = groups[g]
             if c is None:
                 rc, rh = self.rect_c[i], self.rect_h[i]
-                v = rect_rect_distance_one(cx, cy, cs, sn, o.half_x, o.half_y, rc[0], rc[1], self.rect_cos[i],
-                                           self.rect_sin[i], rh[0], rh[1])
+                v = rect_rect_distance_one(cx, cy, cs, sn, o.half_x, o.half_y, float(rc[0]), float(rc[1]),
+                                           float(self.rect_cos[i]), float(self.rect_sin[i]), float(rh[0]),
+                                           float(rh[1]))
             else:
                 px, py = float(c[i, 0]) - cx, float(c[i, 1]) - cy
                 qx, qy = abs(cs * px + sn * py) - o.half_x, abs(cs * py - sn * px) - o.half_y
@@ -296,49 +299,6 @@ class Clearance:
             best = min(best, v)
         return best, min(best, limit - outer)       # those not measured: beyond `limit` or behind the break
 
-
-
-@kernel
-def _rect_rect_one(ax, ay, ac, as_, ahx, ahy, bx, by, bc, bs, bhx, bhy):
-    """:func:`rect_rect_distance_one` compiled (the same operations in the same order)."""
-    dx, dy = bx - ax, by - ay
-    depth = math.inf
-    apart = False
-    for k in range(4):
-        if k == 0:
-            ux, uy = ac, as_
-        elif k == 1:
-            ux, uy = -as_, ac
-        elif k == 2:
-            ux, uy = bc, bs
-        else:
-            ux, uy = -bs, bc
-        ra = ahx * abs(ux * ac + uy * as_) + ahy * abs(uy * ac - ux * as_)
-        rb = bhx * abs(ux * bc + uy * bs) + bhy * abs(uy * bc - ux * bs)
-        overlap = ra + rb - abs(ux * dx + uy * dy)
-        if overlap <= 0.0:
-            apart = True
-            break
-        depth = min(depth, overlap)
-    if not apart:
-        return -depth
-    gap = math.inf
-    for side in range(2):
-        if side == 0:
-            cx, cy, c, sn, hx, hy = ax, ay, ac, as_, ahx, ahy
-            ox, oy, oc, osn, ohx, ohy = bx, by, bc, bs, bhx, bhy
-        else:
-            cx, cy, c, sn, hx, hy = bx, by, bc, bs, bhx, bhy
-            ox, oy, oc, osn, ohx, ohy = ax, ay, ac, as_, ahx, ahy
-        for corner in range(4):
-            sx = 1.0 if corner == 0 or corner == 3 else -1.0
-            sy = 1.0 if corner <= 1 else -1.0
-            px = cx + c * sx * hx - sn * sy * hy - ox
-            py = cy + sn * sx * hx + c * sy * hy - oy
-            qx = abs(oc * px + osn * py) - ohx
-            qy = abs(oc * py - osn * px) - ohy
-            gap = min(gap, math.hypot(max(qx, 0.0), max(qy, 0.0)) + min(max(qx, qy), 0.0))
-    return max(gap, 0.0)
 
 
 @kernel
@@ -378,8 +338,8 @@ def _bounded_kernel(x, y, yaw, ocx, ocy, half_x, half_y, outer, inner, rect_c, r
         if d[k] - outer >= best:
             break
         if k < nr:
-            v = _rect_rect_one(cx, cy, cs, sn, half_x, half_y, rect_c[k, 0], rect_c[k, 1], rect_cos[k], rect_sin[k],
-                               rect_h[k, 0], rect_h[k, 1])
+            v = rect_rect_distance_one(cx, cy, cs, sn, half_x, half_y, rect_c[k, 0], rect_c[k, 1], rect_cos[k],
+                                       rect_sin[k], rect_h[k, 0], rect_h[k, 1])
         else:
             if k < nr + nc:
                 px, py, r = circ_c[k - nr, 0] - cx, circ_c[k - nr, 1] - cy, circ_r[k - nr]

@@ -68,20 +68,21 @@ def test_a_static_wall_passed_by_a_moving_robot_is_not_split():
         assert not (obs.ids >= 0).any()
 
 
-def test_compiled_runs_match_the_python_form():
-    """freespace._runs_kernel (issue 26) gives _runs' [lo, hi) runs on random free masks (bridged gaps, short runs,
-    runs too wide), and picks out a hand-made case: free points 2-6 with point 4 missing are one run, 9 alone is
-    too short."""
-    from bigcbf.perception.freespace import _runs, _runs_kernel
+def test_free_runs_by_hand_and_compiled_as_written():
+    """freespace._runs (compiled, issue 26): a hand-made case: free points 2-6 with point 4 missing are one run, 9
+    alone is too short, and a run wider than the extent limit is none; and on random free masks (bridged gaps,
+    short runs, runs too wide) the compiled kernel gives what its own source gives run as Python."""
+    from bigcbf.perception.freespace import _runs
+    free = np.zeros(12, bool)
+    free[[2, 3, 5, 6, 9]] = True
+    pts = np.column_stack([np.arange(12) * 0.05, np.zeros(12)])
+    assert _runs(free, pts, 3, 0.9).tolist() == [[2, 7]]
+    assert _runs(free, pts, 3, 0.1).tolist() == []
     pr = PerceptionParams()
     rng = np.random.default_rng(5)
     for _ in range(500):
         n = int(rng.integers(1, 60))
         free = rng.random(n) < rng.uniform(0.2, 0.9)
         pts = np.cumsum(rng.uniform(0.0, 0.12, (n, 2)), axis=0)
-        got = [tuple(r) for r in _runs_kernel(free, pts, pr.min_points, pr.compact_max_extent_m).tolist()]
-        assert got == _runs(free, pts, pr)
-    free = np.zeros(12, bool)
-    free[[2, 3, 5, 6, 9]] = True
-    pts = np.column_stack([np.arange(12) * 0.05, np.zeros(12)])
-    assert _runs_kernel(free, pts, 3, 0.9).tolist() == [[2, 7]]
+        args = (free, pts, pr.min_points, pr.compact_max_extent_m)
+        assert _runs(*args).tolist() == _runs.py_func(*args).tolist()

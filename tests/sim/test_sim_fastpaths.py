@@ -136,7 +136,7 @@ def test_contact_lookup_and_snapshot():
 def test_compiled_clearance_matches_its_reference():
     """Clearance.bounded (compiled, issue 26) against bounded_reference (the Python form) at random poses, with
     and without ``below``, over every obstacle subset: the same value and bound, to the last bit but where a
-    distance goes through ``math.hypot``, whose CPython form (correctly rounded) and the C library's (the
+    circle's distance goes through ``math.hypot``, whose CPython form (correctly rounded) and the C library's (the
     kernel's) differ in the last bit in about 1 case in 200; and the kernel is not a stand-in: poses near the
     obstacles take every branch (a rectangle apart and overlapping, a circle, a pedestrian, the early return)."""
     c = Clearance(_scene())
