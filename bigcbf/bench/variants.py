@@ -72,6 +72,9 @@ VARIANT_AXES.add(VariantAxis(
     "cbf_velocity_rows", "[stack] cbf_velocity_rows", ("off", "on"), _stack("cbf_velocity_rows", lambda v: v == "on"),
     "the velocity-aware barrier of the common filter (a collision-cone row per moving obstacle); off: the paper's"))
 VARIANT_AXES.add(VariantAxis(
+    "cbf_slowdown", "[stack] cbf_slowdown", ("off", "on"), _stack("cbf_slowdown", lambda v: v == "on"),
+    "an infeasible step's margins evaluated at slower commands before the last resort; off: the paper's"))
+VARIANT_AXES.add(VariantAxis(
     "cbf_last_resort", "[stack] cbf_last_resort", _last_resorts(), _stack("cbf_last_resort", str),
     "what the common filter commands when no command satisfies every row; slack: the paper's least violation"))
 

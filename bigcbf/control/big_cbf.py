@@ -152,4 +152,5 @@ class BigCbfPlusPlanner(BigCbfPlanner):
             self.score_steps, self.release_params = params.N, params
         # the common filter with its velocity-aware rows and its last resort (methods.filter_params)
         self.filter_params = dataclasses.replace(params, cbf_last_resort=self.rules.last_resort,
-                                                 cbf_velocity_rows=params.cbf_velocity_rows or self.rules.velocity_rows)
+                                                 cbf_velocity_rows=params.cbf_velocity_rows or self.rules.velocity_rows,
+                                                 cbf_slowdown=params.cbf_slowdown or self.rules.slowdown)

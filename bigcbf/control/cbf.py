@@ -58,6 +58,20 @@ alternating projections over those bodies; passive safety, the notion HuNavSim's
 use: a contact that follows is not the robot's doing; fallback "passive"). Every variant is still clipped to the box
 and its row violation measured.
 
+The slowdown (``StackParams.cbf_slowdown``, off by default: the paper's filter). D_i^exec grows with the command
+it is evaluated at (tau95 ||R(A u_in + d) - v_i|| and e_exec(u_in) in eq:uncertainty_margin), and the filter holds it
+fixed at u_in. A gap the robot is driven into at full speed can then have no feasible command, although the same gap
+is wide at a crawl: dev worlds clutter_00006 (0.78 m between a box and a wall; D_i^exec 0.38 m at 0.8 m/s, 0.29 m at
+rest) held big-cbf-plus there in the least-violation command until its time ran out. With the switch, a step that is
+infeasible at u_in is filtered again from s u_in for s in ``SLOWDOWN_SCALES`` (0.5, 0.25, 0), fastest first: the
+rows with D_i^exec evaluated at s u_in, the QP's minimum intervention from s u_in, every other step as above. The
+first s whose QP is feasible gives the command (fallback "slowdown", ``FilterInfo.slowdown`` = s; not infeasible:
+eq:hard_cbf_qp (26) held, with the margins of the command the filter started from, as without the switch). Only
+when no s is feasible does the step stay infeasible, with the least-violation command and the last resort of u_in's
+problem, as without the switch. It is the paper's rule (margins at the command the filter starts from, held fixed)
+applied to a command the filter has first slowed down: what the hard filter does to an infeasible full-speed
+command anyway, but with the margins of the speed it will have.
+
 The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): every selected tracked obstacle
 that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same
 D_i^exec; the rows go through the same pre-check and QP. When that QP has no solution, the distance rows come
@@ -107,6 +121,9 @@ SLACK_PENALTY = 1e4
 #: within this of the least, the minimum-intervention one. A tenth of v_freeze and a sixth of the calibrated execution
 #: residual bound (0.032 m/s): a violation difference the robot cannot execute, let alone measure
 SLACK_TOL_MPS = 5e-3
+#: StackParams.cbf_slowdown: the fractions s of an infeasible step's u_in whose margins are tried, fastest first
+#: (module docstring, "The slowdown") [-]
+SLOWDOWN_SCALES = (0.5, 0.25, 0.0)
 #: FilterInfo.fallback of a step braked for a perception fault (module docstring)
 PERCEPTION_FAULT = "perception-fault"
 
@@ -118,7 +135,8 @@ class FilterInfo:
     active: bool                 # the filter changed the (box-clipped) command: some CBF row was violated
     infeasible: bool             # the QP had no solution (least-violation or brake fallback used)
     fallback: str | None         # None, "least-violation", "brake", "evade", "passive", "velocity-relaxed",
-    #                              "qp-retry", "invalid-input", "perception-fault"
+    #                              "qp-retry", "invalid-input", "perception-fault", "slowdown" (", " and the
+    #                              slowed step's own, if any)
     solve_ms: float              # time of the whole filter call [ms]
     n_constraints: int           # CBF rows considered (when a QP ran: those left after dropping box-redundant rows)
     h_min: float                 # min_i h_i^exec over all obstacles [m^2] (+inf without obstacles)
@@ -134,6 +152,9 @@ class FilterInfo:
     #: that hold over the whole actuator box are dropped)
     margins: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fault: str | None = None     # why the step was a perception fault (fallback "perception-fault"), else None
+    #: StackParams.cbf_slowdown: the fraction s of u_in whose margins and reference made the step feasible (fallback
+    #: "slowdown"), else None
+    slowdown: float | None = None
 
 
 @dataclass
@@ -436,8 +457,23 @@ class CbfFilter:
 
     def filter(self, state: RobotState, obstacles: Obstacles, u_in) -> tuple[np.ndarray, FilterInfo]:
         """eq:cbf_condition, eq:hard_cbf_qp: the minimum-intervention safe command u_safe (3,) and what the filter
-        did."""
+        did. With ``cbf_slowdown``, a step infeasible at u_in is filtered again from the slower commands s u_in
+        (module docstring, "The slowdown")."""
         t0 = time.perf_counter()
+        u, info = self._filter(state, obstacles, u_in, t0)
+        if info.infeasible and self.params.cbf_slowdown:
+            u_in = np.asarray(u_in, float).reshape(3)
+            for s in SLOWDOWN_SCALES:
+                u_s, info_s = self._filter(state, obstacles, s * u_in, t0)
+                if not info_s.infeasible:
+                    info_s.active = True
+                    info_s.fallback = "slowdown" if info_s.fallback is None else f"slowdown, {info_s.fallback}"
+                    info_s.slowdown = s
+                    return u_s, info_s
+        return u, info
+
+    def _filter(self, state: RobotState, obstacles: Obstacles, u_in, t0: float) -> tuple[np.ndarray, FilterInfo]:
+        """The filter of one reference command u_in (:meth:`filter`); ``t0``: when the call began."""
         u_in = np.asarray(u_in, float).reshape(3)
         fallback = None
         if not np.isfinite(u_in).all():

@@ -215,6 +215,10 @@ class StackParams:
       the other rows by the same least-violation QP) or ``passive`` (the least-violation command without its
       approach toward every body the robot is already inside D_i^exec of: passive safety, the robot does not move
       into what it is too close to).
+    - ``cbf_slowdown`` (default false: the paper's filter): when no command satisfies every row with D_i^exec
+      evaluated at u_in, the filter evaluates the margins at the slower commands s u_in, s in ``SLOWDOWN_SCALES``
+      (0.5, 0.25, 0), and takes the first s at which the QP is feasible, minimum intervention from s u_in
+      (``bigcbf.control.cbf``, "The slowdown"); the last resort only when none is.
     """
 
     T_B_s: float = ranged(0.5, 0.002, 60)  # behavior-selection period [s]
@@ -250,6 +254,7 @@ class StackParams:
     cbf_velocity_horizon_s: float = ranged(1.0, 0.1, 60)  # time horizon tau of the collision cone [s]
     cbf_velocity_min_speed_mps: float = ranged(0.2, 0, 5)  # slower tracked obstacles get no cone row [m/s]
     cbf_last_resort: str = "slack"      # the filter when no command satisfies every row: slack, brake or evade
+    cbf_slowdown: bool = False          # opt-in: an infeasible step's margins evaluated at slower commands first
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
 
     def __post_init__(self):
@@ -285,8 +290,9 @@ class StackParams:
         if not all(r >= 0 and math.isfinite(r) for r in self.R_u_diag):
             raise FieldError("R_u_diag", "must be >= 0")
         check_last_resort("cbf_last_resort", self.cbf_last_resort)
-        if not isinstance(self.cbf_velocity_rows, bool):
-            raise FieldError("cbf_velocity_rows", f"must be true or false, got {self.cbf_velocity_rows!r}")
+        for k in ("cbf_velocity_rows", "cbf_slowdown"):
+            if not isinstance(getattr(self, k), bool):
+                raise FieldError(k, f"must be true or false, got {getattr(self, k)!r}")
 
     @property
     def weights(self) -> tuple[float, float, float, float, float]:
@@ -352,6 +358,9 @@ class PlusRules:
     - ``velocity_rows`` (issue 23): the common filter of big-cbf-plus's episodes has its velocity-aware rows on
       (``StackParams.cbf_velocity_rows``, ``bigcbf.control.velocity_barrier``; the same filter every method can run
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
+    - ``slowdown`` (issue 25): the common filter of big-cbf-plus's episodes has its slowdown on
+      (``StackParams.cbf_slowdown``; the same filter every method can run with, ``--variant cbf_slowdown=off,on``);
+      off: the filter of the run's ``[stack]``. On by default since 2026-11-28 (docs/fidelity.md, "The slowdown").
     - ``long_horizon`` (issue 23): the imagination's rollouts run ``long_horizon_s`` (N = long_horizon_s / dt
       steps of eq:behavior_rollout (12)); the paper's N dt is 1.5 s (Table I), which ``big-cbf`` keeps. Every score
       (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)), the barrier acceptance
@@ -393,6 +402,7 @@ class PlusRules:
     executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
     meeting_side: bool = True  # the first side away from a person walking along the path (encounters.py) [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
+    slowdown: bool = True  # the common filter with its slowdown (cbf_slowdown) [on/off]
     long_horizon: bool = True  # rollouts long_horizon_s long; the extra steps test only movers (off: N dt) [on/off]
     long_horizon_s: float = ranged(2.5, 0.1, 10)  # the rollouts' length with long_horizon [s]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]
