@@ -32,8 +32,6 @@ between two scans can mark pieces of wall (which then stay wall points, above).
 from __future__ import annotations
 
 import math
-from collections import deque
-
 import numpy as np
 
 from ..control.jit import kernel
@@ -43,22 +41,25 @@ from .geometry import Cluster, ScanPoints, compact_mask
 
 
 @kernel
-def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, margin, sigma0, sigma_frac):
+def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, rows, margin, sigma0, sigma_frac):
     """(n,) bool: whether each point ``xy`` (n, 2) [m, odom] at range ``ranges`` (n,) from the current sensor lies
-    where an earlier scan's two bracketing beams both returned beyond it (module docstring). Earlier scans h:
+    where an earlier scan's two bracketing beams both returned beyond it (module docstring). The stored scans h:
     ``sensors`` (H, 2) their sensor positions [m, odom]; ``a0`` (H,) the odom bearing of their beam 0 [rad];
-    ``inc`` (H,) their beam spacing [rad]; ``past`` (H, B) their ranges, NaN where a beam did not return;
-    ``n_beams`` (H,) their beam counts. A 360-degree scan wraps its last beam to its first."""
+    ``inc`` (H,) their beam spacing [rad]; ``past`` (H, B) their ranges, NaN where a beam did not return (and
+    beyond their beam count); ``n_beams`` (H,) their beam counts; the earlier scans tested are ``rows`` (in that
+    order). A 360-degree scan wraps its last beam to its first."""
     n = xy.shape[0]
-    H = sensors.shape[0]
+    H = rows.shape[0]
     out = np.zeros(n, np.bool_)
     two_pi = 2.0 * math.pi
     full = np.empty(H, np.bool_)                    # a 360-degree scan: its last beam wraps to its first
-    for h in range(H):
-        full[h] = n_beams[h] * inc[h] >= two_pi - 1e-6
+    for q in range(H):
+        h = rows[q]
+        full[q] = n_beams[h] * inc[h] >= two_pi - 1e-6
     for i in range(n):
         need = margin + 3.0 * (sigma0 + sigma_frac * ranges[i])
-        for h in range(H):
+        for q in range(H):
+            h = rows[q]
             dx = xy[i, 0] - sensors[h, 0]
             dy = xy[i, 1] - sensors[h, 1]
             r = math.sqrt(dx * dx + dy * dy)
@@ -66,7 +67,7 @@ def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, margin, sigma0, s
             j = int(math.floor(a / inc[h]))
             nb = n_beams[h]
             j2 = j + 1
-            if full[h]:
+            if full[q]:
                 j = j % nb
                 j2 = j2 % nb
             elif j < 0 or j2 >= nb:
@@ -80,77 +81,128 @@ def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, margin, sigma0, s
     return out
 
 
+@kernel
+def _earlier(stamps, start, count, stamp, hist, rows):
+    """The stored scans (ring slots start, start + 1, ... mod capacity, ``count`` of them, oldest first; all before
+    ``stamp``) nearest to history/3, 2 history/3 and history before it, distinct, within 1.5 history (of equally
+    near ones the first stored), into ``rows`` (3,); returns how many. One pass over the stored scans."""
+    lo = stamp - 1.5 * hist
+    targets = (stamp - hist / 3.0, stamp - 2.0 * hist / 3.0, stamp - hist)
+    best = np.full(3, -1, np.int64)
+    gap = np.full(3, np.inf)
+    cap = stamps.shape[0]
+    for q in range(count):
+        s = (start + q) % cap
+        t = stamps[s]
+        if lo <= t and t < stamp:
+            for j in range(3):
+                d = abs(t - targets[j])
+                if d < gap[j]:
+                    gap[j], best[j] = d, s
+    k = 0
+    for j in range(3):
+        b = best[j]
+        if b < 0:
+            continue
+        seen = False
+        for q in range(k):
+            seen = seen or rows[q] == b
+        if not seen:
+            rows[k] = b
+            k += 1
+    return k
+
+
+@kernel
+def _carve(xy, ranges, idx, n, stamps, start, count, stamp, hist, sensors, a0, inc, past, n_beams, margin, sigma0,
+           sigma_frac, min_points, max_extent):
+    """:meth:`FreeSpace.split`'s test of the extended clusters (their point indices ``idx`` concatenated, n[c]
+    each) against the earlier scans (:func:`_earlier` of the ring of stored scans): (K, 3) int64 rows [cluster,
+    lo, hi), each cluster's runs of points in free space (:func:`in_free_space`, :func:`_runs`), in order."""
+    rows = np.empty(3, np.int64)
+    h = _earlier(stamps, start, count, stamp, hist, rows)
+    N = idx.shape[0]
+    if h == 0 or N == 0:
+        return np.empty((0, 3), np.int64)
+    pts, rng = np.empty((N, 2)), np.empty(N)
+    for i in range(N):
+        pts[i, 0], pts[i, 1], rng[i] = xy[idx[i], 0], xy[idx[i], 1], ranges[idx[i]]
+    free = in_free_space(pts, rng, sensors, a0, inc, past, n_beams, rows[:h], margin, sigma0, sigma_frac)
+    out = np.empty((N, 3), np.int64)
+    k = 0
+    lo = 0
+    for c in range(n.shape[0]):
+        hi = lo + n[c]
+        runs = _runs(free[lo:hi], pts[lo:hi], min_points, max_extent)
+        for q in range(runs.shape[0]):
+            out[k, 0], out[k, 1], out[k, 2] = c, runs[q, 0], runs[q, 1]
+            k += 1
+        lo = hi
+    return out[:k]
+
+
 class FreeSpace:
-    """The earlier scans the free-space test compares with (module docstring); one per :class:`Perception`."""
+    """The earlier scans the free-space test compares with (module docstring), in a ring of arrays (oldest first
+    from slot ``_start``, ``_count`` of them; grown when full or when a scan has more beams); one per
+    :class:`Perception`."""
 
     def __init__(self, params: PerceptionParams):
         self.params = params
-        self._scans: deque = deque()
+        self.reset()
 
     def reset(self) -> None:
-        self._scans.clear()
+        self._start = self._count = 0
+        self._alloc(16, 0)
+
+    def _alloc(self, cap: int, width: int) -> None:
+        """(Re)allocate the ring with ``cap`` slots of ``width`` beams, the stored scans moved to slots 0, 1, ..."""
+        old = [getattr(self, k, None) for k in ("_stamps", "_sensors", "_a0", "_inc", "_nb", "_past")]
+        self._stamps, self._sensors = np.empty(cap), np.empty((cap, 2))
+        self._a0, self._inc = np.empty(cap), np.empty(cap)
+        self._nb, self._past = np.zeros(cap, np.int64), np.full((cap, width), np.nan)
+        if self._count:
+            slots = (self._start + np.arange(self._count)) % len(old[0])
+            for new, prev in zip((self._stamps, self._sensors, self._a0, self._inc, self._nb), old):
+                new[:self._count] = prev[slots]
+            self._past[:self._count, :old[5].shape[1]] = old[5][slots]
+        self._start = 0
 
     def add(self, scan: LaserScan, sp: ScanPoints, theta_odom: float) -> None:
         """Remember ``scan`` for later tests: its valid returns ``sp`` (``geometry.scan_to_points``; the other beams
         NaN) and the laser's yaw in odom ``theta_odom`` [rad]."""
-        r = np.full(sp.n_beams, np.nan)
-        r[sp.beam] = sp.ranges
-        self._scans.append((float(scan.stamp), sp.sensor, float(scan.angle_min) + theta_odom, sp.angle_increment, r))
+        cap = len(self._stamps)
+        if self._count == cap or sp.n_beams > self._past.shape[1]:
+            self._alloc(2 * cap if self._count == cap else cap, max(sp.n_beams, self._past.shape[1]))
+            cap = len(self._stamps)
+        s = (self._start + self._count) % cap
+        self._count += 1
+        self._stamps[s], self._a0[s] = float(scan.stamp), float(scan.angle_min) + theta_odom
+        self._inc[s], self._sensors[s], self._nb[s] = sp.angle_increment, sp.sensor, sp.n_beams
+        row = self._past[s]
+        row[:] = np.nan
+        row[sp.beam] = sp.ranges
         keep = 1.5 * self.params.free_space_history_s          # the oldest scan a test may use
-        while self._scans and self._scans[0][0] < scan.stamp - keep:
-            self._scans.popleft()
-
-    def _earlier(self, stamp: float) -> list:
-        """The stored scans (all before ``stamp``) nearest to history/3, 2 history/3 and history before it, distinct,
-        within 1.5 history (of equally near ones the first stored). One pass over the stored scans."""
-        hist = self.params.free_space_history_s
-        lo = stamp - 1.5 * hist
-        targets = (stamp - hist / 3.0, stamp - 2.0 * hist / 3.0, stamp - hist)
-        best = [None, None, None]
-        gap = [math.inf, math.inf, math.inf]
-        for s in self._scans:
-            t = s[0]
-            if lo <= t < stamp:
-                for j in range(3):
-                    d = abs(t - targets[j])
-                    if d < gap[j]:
-                        gap[j], best[j] = d, s
-        picked = []
-        for s in best:
-            if s is not None and all(s is not p for p in picked):
-                picked.append(s)
-        return picked
+        self._start, self._count = _evict(self._stamps, self._start, self._count, float(scan.stamp - keep))
 
     def split(self, sp: ScanPoints, clusters: list, is_compact: np.ndarray,
               stamp: float) -> tuple[list, np.ndarray]:
         """The extended clusters' runs of points in free space split out (module docstring). Returns the clusters
         and their compact flags (``geometry.compact_mask`` for a run split out; the wall's pieces stay extended)."""
         pr = self.params
-        if pr.free_space_history_s <= 0 or not clusters or bool(is_compact.all()):
+        if pr.free_space_history_s <= 0 or not clusters or bool(is_compact.all()) or not self._count:
             return clusters, is_compact
-        earlier = self._earlier(stamp)
-        if not earlier:
+        ext = np.flatnonzero(~is_compact).tolist()
+        idx = [clusters[k].idx for k in ext]
+        found = _carve(sp.xy, sp.ranges, np.concatenate(idx), np.array([len(i) for i in idx], np.int64),
+                       self._stamps, self._start, self._count, float(stamp), float(pr.free_space_history_s),
+                       self._sensors, self._a0, self._inc, self._past, self._nb, float(pr.free_space_margin_m),
+                       float(pr.range_sigma_m), float(pr.range_sigma_frac), int(pr.min_points),
+                       float(pr.compact_max_extent_m))
+        if len(found) == 0:
             return clusters, is_compact
-        ext = [k for k, c in enumerate(is_compact) if not c]
-        idx = np.concatenate([clusters[k].idx for k in ext])
-        width = max(len(s[4]) for s in earlier)
-        past = np.full((len(earlier), width), np.nan)
-        for h, s in enumerate(earlier):
-            past[h, :len(s[4])] = s[4]
-        free = in_free_space(np.ascontiguousarray(sp.xy[idx]), np.ascontiguousarray(sp.ranges[idx], dtype=float),
-                             np.array([s[1] for s in earlier]), np.array([s[2] for s in earlier]),
-                             np.array([s[3] for s in earlier]), past, np.array([len(s[4]) for s in earlier], np.int64),
-                             float(pr.free_space_margin_m), float(pr.range_sigma_m), float(pr.range_sigma_frac))
-        if not free.any():
-            return clusters, is_compact
-        runs, start = {}, 0
-        for k in ext:
-            n = len(clusters[k].idx)
-            runs[k] = _runs(free[start:start + n], np.ascontiguousarray(sp.xy[clusters[k].idx]), int(pr.min_points),
-                            float(pr.compact_max_extent_m)).tolist()
-            start += n
-        if not any(runs.values()):
-            return clusters, is_compact
+        runs = {}
+        for c, lo, hi in found.tolist():
+            runs.setdefault(ext[c], []).append((lo, hi))
         out, flags = [], []                     # flags: compact, extended (False) or a run to measure (None)
         for k, cl in enumerate(clusters):
             if not runs.get(k):
@@ -172,6 +224,16 @@ class FreeSpace:
         for i, c in zip(new, compact_mask(sp, [out[i] for i in new], pr)):
             flags[i] = bool(c)
         return out, np.array(flags, bool)
+
+
+@kernel
+def _evict(stamps, start, count, oldest):
+    """The ring (``start``, ``count``) without its scans stamped before ``oldest``, oldest first: (start, count)."""
+    cap = stamps.shape[0]
+    while count > 0 and stamps[start] < oldest:
+        start = (start + 1) % cap
+        count -= 1
+    return start, count
 
 
 @kernel

@@ -5,9 +5,11 @@ import math
 import numpy as np
 
 from bigcbf.params.perception import PerceptionParams
-from bigcbf.perception.freespace import in_free_space
+from bigcbf.perception.freespace import FreeSpace, in_free_space
+from bigcbf.perception.geometry import ScanPoints
 from bigcbf.perception.pipeline import Perception
 from bigcbf.perception.synthetic import ray_scan
+from bigcbf.types import LaserScan
 
 WALL = (-2.0, 1.3, 12.0, 1.3)                    # a corridor wall 1.3 m left of the robot's line
 R_WALKER = 0.25
@@ -35,16 +37,72 @@ def test_point_in_free_space_by_hand():
     a point 4.95 m out is not (within the margin); with beam 1 missing (NaN) there is no evidence."""
     sensors, a0, inc = np.zeros((1, 2)), np.zeros(1), np.array([math.pi / 2])
     past = np.full((1, 4), 5.0)
-    n = np.array([4], np.int64)
+    n, rows = np.array([4], np.int64), np.array([0], np.int64)
     xy = np.array([[2 * math.cos(math.pi / 4), 2 * math.sin(math.pi / 4)],
                    [4.95 * math.cos(math.pi / 4), 4.95 * math.sin(math.pi / 4)]])
     r = np.array([2.0, 4.95])
-    assert in_free_space(xy, r, sensors, a0, inc, past, n, 0.15, 0.0, 0.0).tolist() == [True, False]
+    assert in_free_space(xy, r, sensors, a0, inc, past, n, rows, 0.15, 0.0, 0.0).tolist() == [True, False]
     past[0, 1] = np.nan
-    assert in_free_space(xy, r, sensors, a0, inc, past, n, 0.15, 0.0, 0.0).tolist() == [False, False]
+    assert in_free_space(xy, r, sensors, a0, inc, past, n, rows, 0.15, 0.0, 0.0).tolist() == [False, False]
     past[0, 1] = 5.0                                  # the last beam wraps to the first in a 360-degree scan
     xy3 = np.array([[2 * math.cos(-math.pi / 4), 2 * math.sin(-math.pi / 4)]])
-    assert in_free_space(xy3, r[:1], sensors, a0, inc, past, n, 0.15, 0.0, 0.0).tolist() == [True]
+    assert in_free_space(xy3, r[:1], sensors, a0, inc, past, n, rows, 0.15, 0.0, 0.0).tolist() == [True]
+    # a stored scan not in ``rows`` is not looked at: here one whose beams all return at 1 m
+    two = (np.zeros((2, 2)), np.zeros(2), np.full(2, math.pi / 2), np.vstack([past, np.ones((1, 4))]),
+           np.full(2, 4, np.int64))
+    assert in_free_space(xy, r, *two, np.array([1, 0]), 0.15, 0.0, 0.0).tolist() == [True, False]
+    assert in_free_space(xy, r, *two, np.array([1]), 0.15, 0.0, 0.0).tolist() == [False, False]
+
+
+def ref_earlier(scans, stamp, hist):
+    """freespace.FreeSpace._earlier as of 96c6b28 (over the stored scans' stamps, oldest first): the indices of the
+    picked scans."""
+    lo = stamp - 1.5 * hist
+    targets = (stamp - hist / 3.0, stamp - 2.0 * hist / 3.0, stamp - hist)
+    best = [None, None, None]
+    gap = [math.inf, math.inf, math.inf]
+    for i, t in enumerate(scans):
+        if lo <= t < stamp:
+            for j in range(3):
+                d = abs(t - targets[j])
+                if d < gap[j]:
+                    gap[j], best[j] = d, i
+    picked = []
+    for s in best:
+        if s is not None and s not in picked:
+            picked.append(s)
+    return picked
+
+
+def _ring(fs):
+    """The stored scans of a FreeSpace, oldest first: (stamps, sensors, a0, inc, n_beams, ranges (their beams))."""
+    slots = (fs._start + np.arange(fs._count)) % len(fs._stamps)
+    return [(fs._stamps[s], fs._sensors[s].tolist(), fs._a0[s], fs._inc[s], fs._nb[s],
+             fs._past[s, :fs._nb[s]].tolist()) for s in slots]
+
+
+def test_earlier_scans_and_the_ring_by_hand_and_against_the_reference():
+    """freespace._earlier (compiled, issue 26) picks what the former Python loop picked: by hand (ties to the first
+    stored, distinct, only within 1.5 history and before the stamp) and on random rings (wrapped, with equal
+    stamps)."""
+    from bigcbf.perception.freespace import _earlier
+    rows = np.empty(3, np.int64)
+    stamps = np.array([-0.25, 0.0, 0.25, 0.5, 0.625, 0.875, 0.875, 1.0])   # targets 0.75, 0.5, 0.25 (window -0.125)
+    assert rows[:_earlier(stamps, 0, 8, 1.0, 0.75, rows)].tolist() == [4, 3, 2]      # 0.625 and 0.875 tie: 0.625
+    assert rows[:_earlier(np.array([0.5, 0.875]), 0, 2, 1.0, 0.75, rows)].tolist() == [1, 0]      # distinct
+    assert _earlier(np.array([1.0, -0.25]), 0, 2, 1.0, 0.75, rows) == 0
+    rng = np.random.default_rng(2)
+    for _ in range(2000):
+        cap = int(rng.integers(1, 12))
+        count = int(rng.integers(0, cap + 1))
+        start = int(rng.integers(0, cap))
+        ordered = np.round(np.sort(rng.uniform(0, 3, count)), int(rng.integers(0, 3)))   # rounding: ties
+        ring = np.full(cap, np.nan)
+        ring[(start + np.arange(count)) % cap] = ordered
+        stamp, hist = float(rng.uniform(0.5, 3.5)), float(rng.choice([0.3, 1.0, 2.0]))
+        k = _earlier(ring, start, count, stamp, hist, rows)
+        want = [(start + i) % cap for i in ref_earlier(ordered.tolist(), stamp, hist)]
+        assert rows[:k].tolist() == want
 
 
 def test_walker_against_a_wall_is_tracked_with_free_space_carving():
@@ -86,3 +144,26 @@ def test_free_runs_by_hand_and_compiled_as_written():
         pts = np.cumsum(rng.uniform(0.0, 0.12, (n, 2)), axis=0)
         args = (free, pts, pr.min_points, pr.compact_max_extent_m)
         assert _runs(*args).tolist() == _runs.py_func(*args).tolist()
+
+
+def test_the_ring_keeps_the_last_scans_in_order():
+    """FreeSpace.add keeps the scans of the last 1.5 history in order, through the ring's growth in slots and in
+    beams (a wider scan), each scan's ranges NaN where a beam did not return."""
+    rng = np.random.default_rng(4)
+    fs, kept = FreeSpace(PerceptionParams(free_space_history_s=2.0)), []
+    for k in range(60):
+        n = 8 if k < 25 else 12                                           # a wider scan from scan 25 on
+        r = rng.uniform(0.5, 5.0, n)
+        r[rng.random(n) < 0.3] = np.inf
+        beam = np.flatnonzero(np.isfinite(r))
+        sp = ScanPoints(np.zeros((len(beam), 2)), r[beam], beam, rng.uniform(-1, 1, 2), 2 * math.pi / n, n)
+        scan = LaserScan(0.1 * k, -math.pi, 2 * math.pi / n, 0.1, 10.0, r)
+        fs.add(scan, sp, 0.25 * k)
+        kept.append((0.1 * k, sp.sensor.tolist(), -math.pi + 0.25 * k, 2 * math.pi / n, n,
+                     np.where(np.isfinite(r), r, np.nan).tolist()))
+        kept = [s for s in kept if s[0] >= 0.1 * k - 3.0]
+        got = _ring(fs)
+        assert len(got) == len(kept)
+        for a, b in zip(got, kept):
+            assert a[:5] == b[:5] and np.array_equal(a[5], b[5], equal_nan=True)
+    assert len(fs._stamps) > 16 and fs._past.shape[1] == 12              # it grew in both
