@@ -3,8 +3,8 @@
 Numpy, and compiled kernels (``bigcbf.control.jit.kernel``) for the per-point loops of clustering, the compactness
 test and the wall points; no simulator import (this runs on the robot). Those kernels keep the numpy arithmetic's
 order (sums as numpy's pairwise ``add.reduce``/``reduceat``, cumulative sums in order, transcendental functions
-left to numpy): the results are the bits of the numpy code they replaced. The per-cluster fits that
-:func:`measure_clusters` runs in its loop (the rectangle fit and its covariance, the fixed-radius refit; issue 26)
+left to numpy): the results are the bits of the numpy code they replaced. The fits that
+:func:`measure_clusters` runs for each cluster (the rectangle fit and its covariance, the fixed-radius refit; issue 26)
 are compiled with their own sums, cos and sin: equal to their numpy references (:func:`fit_rectangle`,
 :func:`rectangle_covariance`, :func:`fit_circle_fixed_radius`, which :func:`measure_compact` runs) to rounding
 (tests/perception/test_geometry_compiled.py).
@@ -551,73 +551,135 @@ def measure_compact(points: np.ndarray, sensor: np.ndarray, params: PerceptionPa
                        float(rms_rect), sigma)
 
 
-def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -> tuple[list, np.ndarray]:
-    """:func:`measure_compact` and :func:`concavity` (k = 2) of many compact clusters at once: the algebraic circle
-    fits, residuals, arc spans, covariances and dents of all clusters in a few array operations over their
-    concatenated points (np.*.reduceat), the fixed-radius refits and rectangle fits in a loop over the clusters
-    that need them, compiled (``_fixed_radius_fit``, ``_rect_fit``, ``_rect_cov``). Same results as calling the two
-    per cluster (to rounding: sums run in another order); the per-cluster functions stay the reference
-    (``tests/perception/test_geometry.py``).
+@dataclass(frozen=True)
+class Measurements:
+    """The measurements of m compact clusters (:func:`measure_clusters`), as arrays: each cluster's
+    :class:`Measurement` (``center`` (m, 2), ``radius``, ``arc_fit``, ``cov`` (m, 2, 2), ``rms``, ``rms_expected``,
+    ``round`` (m,)), and the clusters themselves: their ``points`` (N, 2) concatenated, n[j] each, ``idx`` (N,)
+    the points' indices into the ScanPoints, ``occluded`` (m,). Iterates as the m Measurement objects."""
 
-    ``clusters``: Cluster objects of at least 3 points. Returns (measurements, dents [m]).
+    points: np.ndarray
+    n: np.ndarray
+    idx: np.ndarray
+    occluded: np.ndarray
+    center: np.ndarray
+    radius: np.ndarray
+    arc_fit: np.ndarray
+    cov: np.ndarray
+    rms: np.ndarray
+    rms_expected: np.ndarray
+    round: np.ndarray
 
-    Length: one vectorised pass over the concatenated points of all clusters: each block reuses the per-point arrays of
-    the ones before (g, starts, dist, the centres), mirroring measure_compact and concavity block by block; helpers
-    would pass a dozen arrays each."""
-    m = len(clusters)
-    if m == 0:
-        return [], np.zeros(0)
+    def __len__(self) -> int:
+        return len(self.n)
+
+    def __iter__(self):
+        for j in range(len(self.n)):
+            yield Measurement(self.center[j], float(self.radius[j]), bool(self.arc_fit[j]), self.cov[j],
+                              float(self.rms[j]), float(self.rms_expected[j]), bool(self.round[j]))
+
+
+def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -> tuple[Measurements, np.ndarray]:
+    """:func:`measure_compact` and :func:`concavity` (k = 2) of many compact clusters at once, compiled over their
+    concatenated points: the algebraic circle fits, the fixed-radius refits and the arc terms (:func:`_fits`), the
+    arc spans (numpy's arctan2, arccos and arcsin between the kernels), the model choice with the rectangle fits
+    and the covariances (:func:`_models`; a clamped circle's covariance is :func:`_clamped_circle_cov`'s numpy).
+    Same results as calling the two per cluster (to rounding: sums run in another order); the per-cluster functions
+    stay the reference (``tests/perception/test_geometry.py``).
+
+    ``clusters``: Cluster objects of at least 3 points. Returns (measurements, dents [m])."""
     pr = params
+    m = len(clusters)
     n = np.array([len(c.idx) for c in clusters], np.int64)
-    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-    P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])], dtype=float)
-    sensor = sp.sensor
-    # nearest points, range noise, algebraic (Kasa) circle fits and their residuals, as fit_circle (compiled)
+    idx = np.concatenate([c.idx for c in clusters]) if m else np.zeros(0, np.int64)
+    P = np.ascontiguousarray(sp.xy[idx], dtype=float)
+    occluded = np.array([cl.occluded for cl in clusters], np.bool_)
+    if m == 0:
+        z = np.zeros(0)
+        return Measurements(P, n, idx, occluded, np.zeros((0, 2)), z, np.zeros(0, bool), np.zeros((0, 2, 2)), z, z,
+                            np.zeros(0, bool)), z
+    sx, sy = float(sp.sensor[0]), float(sp.sensor[1])
+    c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg, sin_arg = _fits(
+        P, n, sx, sy, float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_min_m),
+        float(pr.radius_max_m), float(sp.angle_increment))
+    center, radius, arc_fit, cov, rms_w, round_, clamped = _models(
+        P, n, np.arctan2(ay, ax), np.arccos(cos_arg), np.arcsin(sin_arg), occluded, c, r, rms, tol, sigma, fitted,
+        A, behind, sx, sy, float(sp.angle_increment), float(pr.range_sigma_m), float(pr.range_sigma_frac),
+        float(pr.radius_min_m), float(pr.radius_max_m), float(pr.fit_min_arc_rad), float(pr.fit_span_ratio),
+        _COARSE, _COARSE_COS, _COARSE_SIN, _FINE)
+    for j in np.flatnonzero(clamped).tolist():            # a won circle of clamped radius (rare): numpy's inverse
+        cov[j] = _clamped_circle_cov(A[0, j], A[1, j], A[2, j], c[j], sp.sensor, pr)
+    return Measurements(P, n, idx, occluded, center, radius, arc_fit, cov, rms_w, sigma, round_), dents
+
+
+@kernel
+def _fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, dphi):
+    """The first part of :func:`measure_clusters` over clusters of n[j] points of P seen from (sx, sy): the
+    algebraic circle fits (:func:`_kasa_fits`), the radius clamped and the centre refitted where the fit is not
+    usable (:func:`_fixed_radius_fit`, 10 iterations from the nearest point pushed back by the radius along its
+    ray), then :func:`_arc_terms`. Returns (c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg,
+    sin_arg)."""
+    m, N = n.shape[0], P.shape[0]
     near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
     sigma, r, rms, tol, fitted = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_)
-    _kasa_fits(P, n, float(sensor[0]), float(sensor[1]), float(pr.range_sigma_m), float(pr.range_sigma_frac),
-               float(pr.radius_min_m), float(pr.radius_max_m), near, ray, sigma, c, r, rms, fitted, tol)
-    fit3, rect, cov_r = np.empty(3), np.empty(10), np.empty((2, 2))
-    for j in np.flatnonzero(~fitted):                    # clamp the radius and refit the centre (rare)
-        rj = float(np.clip(r[j] if np.isfinite(r[j]) else pr.radius_max_m, pr.radius_min_m, pr.radius_max_m))
-        c0 = near[j] + rj * ray[j]
-        _fixed_radius_fit(P, int(starts[j]), int(n[j]), rj, float(c0[0]), float(c0[1]), 10, fit3)
-        c[j, 0], c[j, 1], r[j], rms[j] = fit3[0], fit3[1], rj, fit3[2]
-    # arc span seen from the centre, as measure_compact (numpy's arctan2, arccos, arcsin of compiled arguments)
-    ay, ax, A, dents = np.empty(len(P)), np.empty(len(P)), np.empty((6, m)), np.zeros(m)
-    behind, cos_arg, sin_arg = np.empty(m, np.bool_), np.empty(m), np.empty(m)
-    _arc_terms(P, n, c, near, ray, r, float(sensor[0]), float(sensor[1]), float(sp.angle_increment),
-               float(pr.range_sigma_m), float(pr.range_sigma_frac), ay, ax, A, dents, behind, cos_arg, sin_arg)
-    span, need = np.empty(m), np.empty(m)
-    _arc_need(np.arctan2(ay, ax), n, np.arccos(cos_arg), np.arcsin(sin_arg),
-              np.array([cl.occluded for cl in clusters], np.bool_), float(pr.fit_min_arc_rad),
-              float(pr.fit_span_ratio), span, need)
-    a11, a12, a22 = A[:3]
-    covs = np.empty((m, 2, 2))                 # the fitted-radius circles' covariances, all at once (compiled)
-    _fitted_circle_covs(A, fitted, float(pr.radius_max_m), covs)
-    out = []
-    sx, sy = float(sensor[0]), float(sensor[1])
-    starts_l, n_l, tol_l, rms_l, r_l, sigma_l = (x.tolist() for x in (starts, n, tol, rms, r, sigma))
-    fitted_l, behind_l, span_l, need_l = fitted.tolist(), behind.tolist(), span.tolist(), need.tolist()
+    _kasa_fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, near, ray, sigma, c, r, rms, fitted, tol)
+    fit3 = np.empty(3)
+    start = 0
     for j in range(m):
-        lo, nj = starts_l[j], n_l[j]
+        if not fitted[j]:                                  # clamp the radius and refit the centre (rare)
+            rj = r[j] if math.isfinite(r[j]) else r_max
+            rj = r_min if rj < r_min else rj               # np.clip
+            rj = r_max if rj > r_max else rj
+            _fixed_radius_fit(P, start, n[j], rj, near[j, 0] + rj * ray[j, 0], near[j, 1] + rj * ray[j, 1], 10,
+                              fit3)
+            c[j, 0], c[j, 1], r[j], rms[j] = fit3[0], fit3[1], rj, fit3[2]
+        start += n[j]
+    ay, ax, A, dents = np.empty(N), np.empty(N), np.empty((6, m)), np.zeros(m)
+    behind, cos_arg, sin_arg = np.empty(m, np.bool_), np.empty(m), np.empty(m)
+    _arc_terms(P, n, c, near, ray, r, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents, behind, cos_arg, sin_arg)
+    return c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg, sin_arg
+
+
+@kernel
+def _models(P, n, ang, acos, asin, occluded, c, r, rms, tol, sigma, fitted, A, behind, sx, sy, dphi, sigma0,
+            sigma_frac, r_min, r_max, min_arc, span_ratio, coarse, ccos, csin, fine):
+    """The second part of :func:`measure_clusters`: the arc spans (:func:`_arc_need`), then per cluster the model
+    that wins (:func:`measure_compact`'s rule: the rectangle fit :func:`_rect_fit` unless the circle fits within
+    the noise ``tol``) and its measurement: the circle's (its covariance :func:`_fitted_circle_cov` when its radius
+    was fitted; ``clamped`` marks those whose radius was clamped, left to the caller) or the rectangle's (radius
+    clipped to [r_min, r_max], covariance :func:`_rect_cov`). Returns (center, radius, arc_fit, cov, rms, round,
+    clamped)."""
+    m = n.shape[0]
+    span, need = np.empty(m), np.empty(m)
+    _arc_need(ang, n, acos, asin, occluded, min_arc, span_ratio, span, need)
+    center, radius, cov, rms_w = np.empty((m, 2)), np.empty(m), np.zeros((m, 2, 2)), np.empty(m)
+    arc_fit, round_, clamped = np.zeros(m, np.bool_), np.zeros(m, np.bool_), np.zeros(m, np.bool_)
+    rect = np.empty(10)
+    lo = 0
+    for j in range(m):
+        nj = n[j]
         fitted_rect = False
-        if tol_l[j] > 0 and rms_l[j] <= tol_l[j]:
-            rms_rect = np.inf
+        rms_rect = np.inf
+        if not (tol[j] > 0 and rms[j] <= tol[j]):
+            _rect_fit(P, lo, nj, sx, sy, coarse, ccos, csin, fine, rect)
+            fitted_rect, rms_rect = True, rect[3]
+        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
+            center[j, 0], center[j, 1], radius[j], rms_w[j] = c[j, 0], c[j, 1], r[j], rms[j]
+            arc_fit[j], round_[j] = True, rms[j] <= rms_rect
+            if fitted[j]:
+                _fitted_circle_cov(A[0, j], A[1, j], A[2, j], A[3, j], A[4, j], A[5, j], r_max, cov[j])
+            else:
+                clamped[j] = True
         else:
-            _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
-            fitted_rect, rms_rect = True, float(rect[3])
-        if rms_l[j] <= rms_rect + tol_l[j] and behind_l[j] and span_l[j] >= need_l[j]:
-            cov = covs[j].copy() if fitted_l[j] else _clamped_circle_cov(a11[j], a12[j], a22[j], c[j], sensor, pr)
-            out.append(Measurement(c[j].copy(), r_l[j], True, cov, rms_l[j], sigma_l[j], rms_l[j] <= rms_rect))
-            continue
-        if not fitted_rect:
-            _rect_fit(P, lo, nj, sx, sy, _COARSE, _COARSE_COS, _COARSE_SIN, _FINE, rect)
-        _rect_cov(P, lo, nj, sx, sy, rect[4], rect[5], rect[6], rect[7], rect[8], rect[9], float(sp.angle_increment),
-                  float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_max_m), cov_r)
-        out.append(Measurement(rect[:2].copy(), float(np.clip(rect[2], pr.radius_min_m, pr.radius_max_m)), False,
-                               cov_r.copy(), float(rect[3]), float(sigma[j])))
-    return out, dents
+            if not fitted_rect:
+                _rect_fit(P, lo, nj, sx, sy, coarse, ccos, csin, fine, rect)
+            _rect_cov(P, lo, nj, sx, sy, rect[4], rect[5], rect[6], rect[7], rect[8], rect[9], dphi, sigma0,
+                      sigma_frac, r_max, cov[j])
+            rr = rect[2]
+            rr = r_min if rr < r_min else rr               # np.clip
+            center[j, 0], center[j, 1], radius[j], rms_w[j] = rect[0], rect[1], r_max if rr > r_max else rr, rect[3]
+        lo += nj
+    return center, radius, arc_fit, cov, rms_w, round_, clamped
 
 
 @kernel
@@ -833,18 +895,9 @@ def _fitted_circle_cov(a11, a12, a22, a13, a23, a33, sigma_max, C):
     C[0, 0], C[0, 1], C[1, 0], C[1, 1] = x11, x12, x12, x22
 
 
-@kernel
-def _fitted_circle_covs(A, fitted, sigma_max, out):
-    """:func:`_fitted_circle_cov` of every cluster j with ``fitted[j]`` into out[j] (2, 2), from the sums A (6, m)
-    (a11, a12, a22, a13, a23, a33); the others are left as they are."""
-    for j in range(A.shape[1]):
-        if fitted[j]:
-            _fitted_circle_cov(A[0, j], A[1, j], A[2, j], A[3, j], A[4, j], A[5, j], sigma_max, out[j])
-
-
 def _clamped_circle_cov(a11, a12, a22, center, sensor, params) -> np.ndarray:
     """circle_fit_covariance of a circle whose radius was clamped (not fitted), from the entries of J^T W J
-    (closed-form inverse); the fitted ones are :func:`_fitted_circle_covs`."""
+    (closed-form inverse); the fitted ones are :func:`_fitted_circle_cov`."""
     cap = params.radius_max_m ** 2
     det = a11 * a22 - a12 * a12
     if not det > 0:

@@ -92,9 +92,10 @@ def wall_obstacles(points: np.ndarray, cov_m2) -> Obstacles:
 
 @kernel
 def _grazing(pts, ranges, factor):
-    """:meth:`Perception._grazing` compiled: the (upper) median of the gaps between consecutive points (an order
-    statistic: the same value however found) above ``factor`` times the mean range (numpy's ``mean``: the pairwise
-    sum over the count)."""
+    """Whether a cluster (points ``pts`` in scan order, their ``ranges``) is seen at a grazing angle: the (upper)
+    median of the gaps between consecutive points (an order statistic: the same value however found) above
+    ``factor`` (grazing_spacing_factor beam spacings) times the mean range (numpy's ``mean``: the pairwise sum over
+    the count)."""
     n = pts.shape[0]
     gaps = np.empty(n - 1)
     for i in range(n - 1):
@@ -102,6 +103,25 @@ def _grazing(pts, ranges, factor):
         gaps[i] = math.sqrt(dx ** 2 + dy ** 2)
     spacing = np.sort(gaps)[(n - 1) // 2]
     return spacing > factor * ((0.0 + _pairwise(ranges, 0, n)) / n)
+
+
+@kernel
+def _rejected(P, ranges, idx, n, occluded, arc_fit, rms, rms_expected, dents, grazing, rms_ratio, dent_ratio):
+    """(m,) bool: the measured compact clusters (points P, n[j] each, their indices ``idx`` into the scan's
+    ``ranges``) that :meth:`Perception.update` turns into wall points: not a clean arc and either partly hidden or
+    seen at a grazing angle (:func:`_grazing`, factor ``grazing``), or the winning model's RMS residual above
+    ``rms_ratio``, or the dent above ``dent_ratio``, times the noise's RMS there."""
+    m = n.shape[0]
+    out = np.empty(m, np.bool_)
+    lo = 0
+    for j in range(m):
+        hi = lo + n[j]
+        bad = rms[j] > rms_ratio * rms_expected[j] or dents[j] > dent_ratio * rms_expected[j]
+        if not arc_fit[j] and not bad:
+            bad = occluded[j] or _grazing(P[lo:hi], ranges[idx[lo:hi]], grazing)
+        out[j] = bad
+        lo = hi
+    return out
 
 
 @kernel
@@ -150,11 +170,6 @@ class Perception:
     def last_ms(self) -> float:
         """Wall-clock time of the last ``update`` [ms]."""
         return self._last_ms
-
-    def _grazing(self, pts: np.ndarray, ranges: np.ndarray, angle_increment: float) -> bool:
-        """Median spacing of consecutive points above grazing_spacing_factor beam spacings at the mean range."""
-        return _grazing(np.ascontiguousarray(pts, dtype=float), np.ascontiguousarray(ranges, dtype=float),
-                        float(self.params.grazing_spacing_factor * angle_increment))
 
     def _segment(self, sp, clusters: list, is_compact: np.ndarray) -> tuple[list, np.ndarray]:
         """Track-aided segmentation: a cluster that holds known objects (points on the predicted circles of
@@ -238,23 +253,17 @@ class Perception:
         self.free_space.add(scan, sp, float(pose[2]) + pr.laser_yaw_rad)
         clusters, is_compact = self._segment(sp, clusters, is_compact)
         walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
-        candidates = [cl for cl, c in zip(clusters, is_compact) if c]
-        centers, radii, covs, rounds, compact = [], [], [], [], []
-        measurements, dents = measure_clusters(sp, candidates, pr)
-        for cl, meas, dent in zip(candidates, measurements, dents):
-            pts = sp.xy[cl.idx]
-            if ((not meas.arc_fit and (cl.occluded or self._grazing(pts, sp.ranges[cl.idx], sp.angle_increment)))
-                    or meas.rms > pr.fit_rms_ratio_max * meas.rms_expected
-                    or dent > pr.concavity_ratio_max * meas.rms_expected):
-                walls.append(pts)
-                continue
-            centers.append(meas.center)
-            radii.append(meas.radius)
-            covs.append(meas.cov)
-            rounds.append(meas.round)
-            compact.append(pts)
-        rejected = self.tracker.step(float(scan.stamp), np.array(centers).reshape(-1, 2), np.array(radii), robot,
-                                     np.array(covs).reshape(-1, 2, 2), np.array(rounds, bool), compact)
+        ms, dents = measure_clusters(sp, [cl for cl, c in zip(clusters, is_compact) if c], pr)
+        bad = _rejected(ms.points, sp.ranges, ms.idx, ms.n, ms.occluded, ms.arc_fit, ms.rms, ms.rms_expected, dents,
+                        float(pr.grazing_spacing_factor * sp.angle_increment), float(pr.fit_rms_ratio_max),
+                        float(pr.concavity_ratio_max))
+        compact, lo = [], 0                                         # the measured ones' point sets (views)
+        for hi, b in zip(np.cumsum(ms.n).tolist(), bad.tolist()):
+            (walls if b else compact).append(ms.points[lo:hi])
+            lo = hi
+        good = ~bad
+        rejected = self.tracker.step(float(scan.stamp), ms.center[good], ms.radius[good], robot, ms.cov[good],
+                                     ms.round[good], compact)
         walls += [compact[k] for k in rejected]
         circles, surfaces = self.tracker.report(robot)
         walls += surfaces

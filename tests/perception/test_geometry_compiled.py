@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from bigcbf.params.perception import PerceptionParams
-from bigcbf.perception import geometry as G
+from bigcbf.perception import geometry as G, pipeline
 from bigcbf.perception.synthetic import box_segments, ray_scan
 from bigcbf.perception.kalman import static_update
 
@@ -309,6 +309,12 @@ def test_compiled_geometry_is_the_numpy_code_bit_for_bit(params):
             np.testing.assert_allclose(a.cov, b.cov, rtol=1e-9, atol=1e-15)
             np.testing.assert_allclose((a.radius, a.rms), (b.radius, b.rms), rtol=1e-9, atol=1e-12)
             assert (a.arc_fit, a.rms_expected, a.round) == (b.arc_fit, b.rms_expected, b.round)
+        # the pipeline's test of the measurements (compiled, issue 26) against its former Python loop
+        assert np.array_equal(ms.points, sp.xy[ms.idx]) and ms.n.tolist() == [len(c.idx) for c in compact]
+        args = (ms.points, sp.ranges, ms.idx, ms.n, ms.occluded, ms.arc_fit, ms.rms, ms.rms_expected, dents,
+                float(params.grazing_spacing_factor * sp.angle_increment), float(params.fit_rms_ratio_max),
+                float(params.concavity_ratio_max))
+        assert np.array_equal(pipeline._rejected(*args), ref_rejected(*args))
         sets = [sp.xy[c.idx] for c in want] + [np.zeros((0, 2))]
         robot = np.array(pose[:2])
         for spacing in (0.2, 0.05):
@@ -425,12 +431,35 @@ def ref_split_candidates(owner, idx, n, static, compact):
     return (hi >= 0) & ((lo != hi) | (walker & ~compact))
 
 
-def ref_grazing(self, pts, ranges, angle_increment):
-    """pipeline.Perception._grazing as of d27bf46."""
+def ref_grazing(pts, ranges, factor):
+    """pipeline._grazing as of d27bf46 (then Perception._grazing, ``factor`` grazing_spacing_factor times the beam
+    spacing)."""
     step = np.diff(pts, axis=0)
     gaps = np.sqrt(step[:, 0] ** 2 + step[:, 1] ** 2)
     spacing = float(np.partition(gaps, len(gaps) // 2)[len(gaps) // 2])
-    return spacing > self.params.grazing_spacing_factor * angle_increment * float(np.mean(ranges))
+    return spacing > factor * float(np.mean(ranges))
+
+
+def ref_rejected(P, ranges, idx, n, occluded, arc_fit, rms, rms_expected, dents, grazing, rms_ratio, dent_ratio):
+    """pipeline._rejected: the test of Perception.update's loop over the measurements as of 96c6b28."""
+    out, lo = [], 0
+    for j, k in enumerate(n):
+        pts = P[lo:lo + k]
+        out.append(bool((not arc_fit[j] and (occluded[j] or ref_grazing(pts, ranges[idx[lo:lo + k]], grazing)))
+                        or rms[j] > rms_ratio * rms_expected[j] or dents[j] > dent_ratio * rms_expected[j]))
+        lo += k
+    return np.array(out, bool)
+
+
+def ref_measurements(sp, clusters, params):
+    """ref_measure_clusters as geometry.measure_clusters returns it (geometry.Measurements)."""
+    ms, dents = ref_measure_clusters(sp, clusters, params)
+    idx = np.concatenate([c.idx for c in clusters]) if clusters else np.zeros(0, np.int64)
+    arrays = [np.array([getattr(m, f) for m in ms], dtype=t).reshape((len(ms),) + s) for f, t, s in
+              (("center", float, (2,)), ("radius", float, ()), ("arc_fit", bool, ()), ("cov", float, (2, 2)),
+               ("rms", float, ()), ("rms_expected", float, ()), ("round", bool, ()))]
+    return G.Measurements(sp.xy[idx], np.array([len(c.idx) for c in clusters], np.int64), idx,
+                          np.array([c.occluded for c in clusters], bool), *arrays), np.asarray(dents, float)
 
 
 def _episode_frames(name, seconds):
@@ -473,7 +502,7 @@ def test_whole_pipeline_is_the_numpy_pipeline(monkeypatch, source):
     got = [perc.update(*f) for f in frames]
     monkeypatch.setattr(pipeline, "cluster_points", ref_cluster_points)
     monkeypatch.setattr(pipeline, "compact_mask", ref_compact_mask)
-    monkeypatch.setattr(pipeline, "measure_clusters", ref_measure_clusters)
+    monkeypatch.setattr(pipeline, "measure_clusters", ref_measurements)
     monkeypatch.setattr(pipeline, "wall_candidates_many", ref_wall_candidates_many)
     monkeypatch.setattr(pipeline, "_split_candidates", ref_split_candidates)
     monkeypatch.setattr(Tracker, "surface_owner", ref_surface_owner)
@@ -481,7 +510,7 @@ def test_whole_pipeline_is_the_numpy_pipeline(monkeypatch, source):
     monkeypatch.setattr(pipeline, "select_wall_points", ref_select_wall_points)
     monkeypatch.setattr(pipeline, "wall_point_covariance", ref_wall_point_covariance)
     monkeypatch.setattr(Tracker, "step", ref_step)
-    monkeypatch.setattr(pipeline.Perception, "_grazing", ref_grazing)
+    monkeypatch.setattr(pipeline, "_rejected", ref_rejected)
     perc = pipeline.Perception()
     want = [perc.update(*f) for f in frames]
     n_tracks = 0
