@@ -101,6 +101,22 @@ def _nearest_circle(points, c, r, tol, conf, out):
 
 
 @kernel
+def _surface_owner(points, confirmed, x, P, r, merge_tol):
+    """:meth:`Tracker.surface_owner` compiled: the confirmed tracks' circles and tolerances
+    (:func:`_surface_tolerance`), each point's owner (:func:`_nearest_circle`), -1 where none."""
+    out = np.full(points.shape[0], -1, np.int64)
+    conf = np.flatnonzero(confirmed)
+    if conf.shape[0] == 0 or points.shape[0] == 0:
+        return out
+    c, rc, tol = np.empty((conf.shape[0], 2)), np.empty(conf.shape[0]), np.empty(conf.shape[0])
+    for k in range(conf.shape[0]):
+        c[k, 0], c[k, 1], rc[k] = x[conf[k], 0], x[conf[k], 1], r[conf[k]]
+    _surface_tolerance(P, conf, merge_tol, tol)
+    _nearest_circle(points, c, rc, tol, conf, out)
+    return out
+
+
+@kernel
 def _gate(z, radii, R, x, P, r, chi2, gate_min, gate_max, gate_radius, infeasible, cost, ok):
     """:meth:`Tracker.associate`'s gate and cost (n tracks, m measurements) into ``cost`` and ``ok`` (n, m):
     y = z_j - p_i, S = P_i[:2, :2] + R_j, Mahalanobis distance squared as ``kalman.mahalanobis2``, in its order."""
@@ -121,7 +137,7 @@ def _apply_hits(rows, cols, x, P, radii, rnd, t, sigma, a, b, confirm_hits, clas
                 dynamic_sigma, v_static, n_dynamic, n_static, r, roundness, hits, misses, last_hit, confirmed, static,
                 n_dyn, n_stat, Ps, P_hit):
     """The bookkeeping of :meth:`Tracker.step` for the tracks ``rows`` updated by measurements ``cols`` (their
-    updated states x (K, 4) and covariances P (K, 4, 4), the speed's std ``sigma``): radius and roundness smoothed
+    updated states x[rows] and covariances P[rows], the speed's std ``sigma``): radius and roundness smoothed
     (factors a, b), hits, misses, time of the hit, confirmation, the static/dynamic hysteresis
     (``classify._hysteresis``; a young track keeps its class and zero counters) and the reported covariance at
     the hit, in place, in the numpy formulation's order."""
@@ -136,7 +152,7 @@ def _apply_hits(rows, cols, x, P, radii, rnd, t, sigma, a, b, confirm_hits, clas
         last_hit[i] = t
         confirmed[i] = confirmed[i] or hits[i] >= confirm_hits
         st_in[k], nd_in[k], ns_in[k] = static[i], n_dyn[i], n_stat[i]
-        speed[k] = math.sqrt(x[k, 2] * x[k, 2] + x[k, 3] * x[k, 3])
+        speed[k] = math.sqrt(x[i, 2] * x[i, 2] + x[i, 3] * x[i, 3])
     st, nd, ns = np.empty(K, np.bool_), np.empty(K, np.int64), np.empty(K, np.int64)
     _hysteresis(st_in, nd_in, ns_in, speed, sigma, v_dynamic, dynamic_sigma, v_static, n_dynamic, n_static, st, nd,
                 ns)
@@ -148,7 +164,26 @@ def _apply_hits(rows, cols, x, P, radii, rnd, t, sigma, a, b, confirm_hits, clas
         n_stat[i] = 0 if young else ns[k]
         for p in range(2):
             for q in range(2):
-                P_hit[i, p, q] = Ps[i, p, q] if static[i] else P[k, p, q]
+                P_hit[i, p, q] = Ps[i, p, q] if static[i] else P[i, p, q]
+
+
+@kernel
+def _missed(rows, t, coast, tentative_max, misses, confirmed, last_hit):
+    """:meth:`Tracker.step`'s misses and deletion test: one more miss for every track not in ``rows``; returns
+    whether each track is kept (confirmed: its last hit at most ``coast`` before t; tentative: at most
+    ``tentative_max`` misses) and whether all are."""
+    n = misses.shape[0]
+    hit = np.zeros(n, np.bool_)
+    for k in range(rows.shape[0]):
+        hit[rows[k]] = True
+    alive = np.empty(n, np.bool_)
+    every = True
+    for i in range(n):
+        if not hit[i]:
+            misses[i] += 1
+        alive[i] = t - last_hit[i] <= coast if confirmed[i] else misses[i] <= tentative_max
+        every = every and alive[i]
+    return alive, every
 
 
 @kernel
@@ -397,15 +432,8 @@ class Tracker:
         predicted circle it lies (|p - c| - r within merge_tol_m plus twice the track's position std; the nearest
         such circle), or -1. Call after :meth:`predict`: the pipeline splits clusters that hold known objects along
         this (track-aided segmentation)."""
-        out = np.full(len(points), -1)
-        conf = np.flatnonzero(self.confirmed)
-        if len(conf) == 0 or len(points) == 0:
-            return out
-        c, r = np.ascontiguousarray(self.x[conf, :2]), np.ascontiguousarray(self.r[conf])
-        tol = np.empty(len(conf))
-        _surface_tolerance(self.P, conf, float(self.params.merge_tol_m), tol)
-        _nearest_circle(np.ascontiguousarray(points, dtype=float), c, r, tol, conf.astype(np.int64), out)
-        return out
+        return _surface_owner(np.ascontiguousarray(points, dtype=float), self.confirmed, self.x, self.P, self.r,
+                              float(self.params.merge_tol_m))
 
     def associate(self, z: np.ndarray, radii: np.ndarray, R: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Matched (track index, measurement index) pairs for cluster centres z (M,2) with radii (M,) and
@@ -444,49 +472,48 @@ class Tracker:
         radii = np.asarray(radii, float).reshape(-1)
         R = self.measurement_covariance(cov, m)
         rnd = np.ones(m) if round_ is None else np.asarray(round_, float).reshape(m)
-        surf = np.empty(m, object)
-        for k in range(m):
-            surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
         self.predict(t)
         rows, cols = self.associate(z, radii, R)
+        rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
         if len(rows):
             # the CV and constant-position filters' updates, the speed's std (compiled: _measurement_update)
-            rows64, cols64 = rows.astype(np.int64), cols.astype(np.int64)
             sigma = np.empty(len(rows))
-            _measurement_update(rows64, cols64, self.x, self.P, self.xs, self.Ps, np.ascontiguousarray(z),
+            _measurement_update(rows, cols, self.x, self.P, self.xs, self.Ps, np.ascontiguousarray(z),
                                 np.ascontiguousarray(R), float(pr.gate_chi2), sigma, self.sv_hit)
-            self.surface[rows] = surf[cols]
+            for i, j in zip(rows.tolist(), cols.tolist()):
+                self.surface[i] = np.zeros((0, 2)) if surface is None else surface[j]
             # the smoothed radius and shape, the counters, and the classification (hysteresis_step), which starts
             # once the velocity rests on more than classify_after_hits measurements: a young track's velocity is the
             # difference of two or three noisy centres (module docstring); compiled (_apply_hits)
-            _apply_hits(rows64, cols64, np.ascontiguousarray(self.x[rows]), np.ascontiguousarray(self.P[rows]),
-                        np.ascontiguousarray(radii), np.ascontiguousarray(rnd, dtype=float), float(t),
-                        sigma, float(pr.radius_smoothing),
+            _apply_hits(rows, cols, self.x, self.P, np.ascontiguousarray(radii),
+                        np.ascontiguousarray(rnd, dtype=float), float(t), sigma, float(pr.radius_smoothing),
                         float(pr.shape_smoothing), int(pr.confirm_hits), int(pr.classify_after_hits),
                         float(pr.v_dynamic_mps), float(pr.dynamic_sigma), float(pr.v_static_mps), int(pr.n_dynamic),
                         int(pr.n_static), self.r, self.roundness, self.hits, self.misses, self.last_hit,
                         self.confirmed, self.static, self.n_dyn, self.n_stat, self.Ps, self.P_hit)
-        missed = np.ones(len(self), bool)
-        missed[rows] = False
-        self.misses[missed] += 1
-        alive = np.where(self.confirmed, t - self.last_hit <= pr.coast_s + 1e-9,
-                         self.misses <= pr.tentative_max_misses)
-        if not alive.all():                       # (all alive: the arrays stay as they are)
+        alive, every = _missed(rows, float(t), float(pr.coast_s + 1e-9), int(pr.tentative_max_misses), self.misses,
+                               self.confirmed, self.last_hit)
+        if not every:                             # (all alive: the arrays stay as they are)
             self._keep(alive)
         # births from unclaimed clusters, unless the centre lies inside a known object's circle (a split cluster)
-        free = np.ones(len(z), bool)
-        free[cols] = False
-        rejected = np.zeros(len(z), bool)
-        if free.any() and len(self):
-            d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
-            rejected |= free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
-            free &= ~rejected
-        if free.any():
-            self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
+        rejected = np.zeros(0, np.intp)
+        if len(cols) < m:                         # (a cluster no track claimed)
+            free = np.ones(m, bool)
+            free[cols] = False
+            if len(self):
+                d = np.linalg.norm(z[:, None, :] - self.x[None, :, :2], axis=2)
+                out = free & (d < np.maximum(self.r[None, :], radii[:, None])).any(axis=1)
+                free &= ~out
+                rejected = np.flatnonzero(out)
+            if free.any():
+                surf = np.empty(m, object)
+                for k in range(m):
+                    surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
+                self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
         if len(self) > pr.max_candidates:
             keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
             self._keep(np.sort(keep))
-        return np.flatnonzero(rejected)
+        return rejected
 
     def reported(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position (K, 2) and covariance (K, 2, 2) of tracks ``idx`` as reported: the constant-position filter's
@@ -521,28 +548,48 @@ class Tracker:
         free space around it) and the confirmed tracks beyond the budget (those measured now when dynamic, since a
         walker's old points are stale), and the tentative tracks measured now (an object seen for the first time
         is an obstacle before its track is confirmed)."""
-        pr = self.params
-        measured = self.last_hit >= (self.t if self.t is not None else 0.0) - 1e-9
-        circle = self.confirmed & (~self.static | self.is_round())
-        idx = np.flatnonzero(circle)
-        order = _nearest_first(idx, self.x, self.r, float(robot_xy[0]), float(robot_xy[1]))
-        order, beyond = order[: pr.max_tracks], order[pr.max_tracks:]
-        as_points = np.zeros(len(self), bool)
-        as_points[beyond] = True
-        as_points |= self.confirmed & ~circle
-        as_points &= self.static | measured
-        as_points |= ~self.confirmed & measured
-        surfaces = [self.surface[k] for k in np.flatnonzero(as_points) if len(self.surface[k])]
+        since = (self.t if self.t is not None else 0.0) - 1e-9                # measured now: hit since then
+        order, as_points, v, r, static, ids = _circles(
+            self.confirmed, self.static, self.is_round(), self.last_hit, since, self.x, self.r, self.ids,
+            float(robot_xy[0]), float(robot_xy[1]), int(self.params.max_tracks))
+        surfaces = [self.surface[k] for k in np.flatnonzero(as_points).tolist() if len(self.surface[k])]
         if len(order) == 0:
             return Obstacles.empty(), surfaces
-        v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
         p, cov = self.reported(order)
-        return (Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy()),
-                surfaces)
+        return Obstacles(p, v, cov, r, static, ids), surfaces
 
     def obstacles(self, robot_xy: np.ndarray) -> Obstacles:
         """The circles of :meth:`report`."""
         return self.report(robot_xy)[0]
+
+
+@kernel
+def _circles(confirmed, static, round_, last_hit, since, x, r, ids, rx, ry, max_tracks):
+    """:meth:`Tracker.report`'s choice, compiled: the circles (confirmed tracks, dynamic or ``round_``), at most
+    ``max_tracks``, nearest first (:func:`_nearest_first`), and the tracks reported by their surface
+    (``as_points``: the circles beyond the budget and the confirmed tracks that are not circles, each when static
+    or measured now, i.e. hit at ``since`` or later; the tentative tracks measured now). Returns (order,
+    as_points, and the circles' velocities (0 when static), radii, static flags and ids)."""
+    n = confirmed.shape[0]
+    circle = np.empty(n, np.bool_)
+    for i in range(n):
+        circle[i] = confirmed[i] and (not static[i] or round_[i])
+    ranked = _nearest_first(np.flatnonzero(circle), x, r, rx, ry)
+    order = ranked[:max_tracks]
+    as_points = np.zeros(n, np.bool_)
+    for i in ranked[max_tracks:]:
+        as_points[i] = True
+    for i in range(n):
+        measured = last_hit[i] >= since
+        as_points[i] = (((as_points[i] or (confirmed[i] and not circle[i])) and (static[i] or measured))
+                        or (not confirmed[i] and measured))
+    k = order.shape[0]
+    v, r_o, st, id_o = np.empty((k, 2)), np.empty(k), np.empty(k, np.bool_), np.empty(k, ids.dtype)
+    for q in range(k):
+        i = order[q]
+        v[q, 0], v[q, 1] = (0.0, 0.0) if static[i] else (x[i, 2], x[i, 3])
+        r_o[q], st[q], id_o[q] = r[i], static[i], ids[i]
+    return order, as_points, v, r_o, st, id_o
 
 
 @kernel

@@ -106,3 +106,69 @@ def test_nearest_first_is_numpys_stable_argsort():
         robot = rng.uniform(-1, 1, 2)
         ref = idx[np.argsort((np.linalg.norm(x[:, :2] - robot, axis=1) - r)[idx], kind="stable")]
         assert np.array_equal(_nearest_first(idx, x, r, float(robot[0]), float(robot[1])), ref)
+
+
+def ref_report(self, robot_xy):
+    """tracker.Tracker.report as of 96c6b28."""
+    from bigcbf.types import Obstacles
+    from bigcbf.perception.tracker import _nearest_first
+    pr = self.params
+    measured = self.last_hit >= (self.t if self.t is not None else 0.0) - 1e-9
+    circle = self.confirmed & (~self.static | self.is_round())
+    idx = np.flatnonzero(circle)
+    order = _nearest_first(idx, self.x, self.r, float(robot_xy[0]), float(robot_xy[1]))
+    order, beyond = order[: pr.max_tracks], order[pr.max_tracks:]
+    as_points = np.zeros(len(self), bool)
+    as_points[beyond] = True
+    as_points |= self.confirmed & ~circle
+    as_points &= self.static | measured
+    as_points |= ~self.confirmed & measured
+    surfaces = [self.surface[k] for k in np.flatnonzero(as_points) if len(self.surface[k])]
+    if len(order) == 0:
+        return Obstacles.empty(), surfaces
+    v = np.where(self.static[order, None], 0.0, self.x[order, 2:])
+    p, cov = self.reported(order)
+    return (Obstacles(p, v, cov, self.r[order].copy(), self.static[order].copy(), self.ids[order].copy()),
+            surfaces)
+
+
+def test_report_and_misses_compiled_match_their_numpy_form():
+    """Tracker.report's choice (compiled: tracker._circles, issue 26) against its numpy form (as of 96c6b28) on
+    random track sets (confirmed or not, static or not, round or not, measured now or coasting, over the budget,
+    surfaces empty or not): the same circles, bit for bit, and the same surfaces; and tracker._missed against the
+    numpy form of Tracker.step's misses and deletion test."""
+    from bigcbf.params.perception import PerceptionParams
+    from bigcbf.perception.tracker import Tracker, _missed
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        T = Tracker(PerceptionParams(max_tracks=int(rng.integers(0, 6))))
+        n = int(rng.integers(0, 12))
+        T.x, T.P = rng.normal(size=(n, 4)), _spd(rng, n, 4, 0.4)
+        T.xs, T.Ps, T.P_hit = rng.normal(size=(n, 2)), _spd(rng, n, 2, 0.2), _spd(rng, n, 2, 0.05)
+        T.sv_hit, T.r = rng.uniform(0.01, 0.3, n), rng.uniform(0.05, 0.5, n)
+        T.confirmed, T.static = rng.random(n) < 0.7, rng.random(n) < 0.5
+        T.roundness = rng.choice([0.0, 0.4, 0.5, 1.0], n)
+        T.ids = rng.permutation(100)[:n]
+        T.t = 3.0
+        T.last_hit = np.where(rng.random(n) < 0.5, 3.0, 3.0 - rng.uniform(0.05, 1.5, n))
+        T.surface = np.empty(n, object)
+        for k in range(n):
+            T.surface[k] = rng.normal(size=(int(rng.integers(0, 3)), 2))
+        robot = rng.uniform(-1, 1, 2)
+        (a, sa), (b, sb) = T.report(robot), ref_report(T, robot)
+        for f in ("p", "v", "cov", "r", "static", "ids"):
+            x, y = getattr(a, f), getattr(b, f)
+            assert x.dtype == y.dtype and np.array_equal(x, y), f
+        assert len(sa) == len(sb) and all(p is q for p, q in zip(sa, sb))
+        # the misses and the deletion test
+        T.misses = rng.integers(0, 4, n)
+        rows = np.flatnonzero(rng.random(n) < 0.5)
+        pr, t = T.params, 3.2
+        missed = np.ones(n, bool)
+        missed[rows] = False
+        want = T.misses.copy()
+        want[missed] += 1
+        alive = np.where(T.confirmed, t - T.last_hit <= pr.coast_s + 1e-9, want <= pr.tentative_max_misses)
+        got, every = _missed(rows, t, float(pr.coast_s + 1e-9), int(pr.tentative_max_misses), T.misses,
+                             T.confirmed, T.last_hit)
+        assert np.array_equal(T.misses, want) and np.array_equal(got, alive) and every == alive.all()
