@@ -125,6 +125,20 @@ def _rejected(P, ranges, idx, n, occluded, arc_fit, rms, rms_expected, dents, gr
 
 
 @kernel
+def _with_walls(p, v, cov, r, static, ids, wall_pts, wall_cov):
+    """``circles.concat(wall_obstacles(wall_pts, wall_cov))`` compiled: the arrays (p, v, cov, r, static, ids) of
+    the circles followed by the wall points (velocity 0, radius 0, static, id -1, covariance ``wall_cov``)."""
+    k, m = r.shape[0], wall_pts.shape[0]
+    po, vo, co = np.empty((k + m, 2)), np.zeros((k + m, 2)), np.empty((k + m, 2, 2))
+    ro, so, io = np.zeros(k + m), np.ones(k + m, np.bool_), np.full(k + m, -1, ids.dtype)
+    for i in range(k):
+        po[i], vo[i], co[i], ro[i], so[i], io[i] = p[i], v[i], cov[i], r[i], static[i], ids[i]
+    for i in range(m):
+        po[k + i], co[k + i] = wall_pts[i], wall_cov[i]
+    return po, vo, co, ro, so, io
+
+
+@kernel
 def _split_candidates(owner, idx, n, static, compact):
     """(len(n),) bool: the clusters (n[k] points each, their point indices concatenated in ``idx``) that
     :meth:`Perception._segment` examines: points on two tracks' surfaces (``owner`` >= 0: the track index of
@@ -183,15 +197,14 @@ class Perception:
         steps."""
         pr = self.params
         T = self.tracker
-        if len(clusters) == 0 or not np.any(T.confirmed):
+        if len(clusters) == 0 or not T.confirmed.any():
             return clusters, is_compact
         owner = T.surface_owner(sp.xy)
-        owned = np.flatnonzero(owner >= 0)
-        if len(owned) == 0:
+        if len(owner) == 0 or owner.max() < 0:
             return clusters, is_compact
         # only clusters with points on two tracks, or on a walker while extended, can need a split
         check = np.flatnonzero(_split_candidates(
-            owner.astype(np.int64), np.concatenate([cl.idx for cl in clusters]).astype(np.int64),
+            np.asarray(owner, np.int64), np.asarray(np.concatenate([cl.idx for cl in clusters]), np.int64),
             np.array([len(cl.idx) for cl in clusters], np.int64), np.ascontiguousarray(T.static, dtype=np.bool_),
             np.ascontiguousarray(is_compact, dtype=np.bool_)))
         if len(check) == 0:
@@ -270,6 +283,7 @@ class Perception:
         wall_pts = select_wall_points(wall_candidates_many(walls, robot, pr.wall_spacing_m), robot, pr)
         self.last_wall_points = wall_pts
         wall_cov = wall_point_covariance(wall_pts, sp.sensor, sp.angle_increment, pr)
-        out = circles.concat(wall_obstacles(wall_pts, wall_cov))
+        out = Obstacles(*_with_walls(circles.p, circles.v, circles.cov, circles.r, circles.static, circles.ids,
+                                     np.ascontiguousarray(wall_pts, dtype=float), wall_cov))
         self._last_ms = 1e3 * (time.perf_counter() - t0)
         return out

@@ -697,3 +697,21 @@ def test_segment_sums_are_numpy_reduceat_and_mean_bit_for_bit():
         en = np.concatenate([st[1:], [n]])
         assert np.array_equal(np.add.reduceat(a, st), [G._segsum(a, s, e - s) for s, e in zip(st, en)])
         assert np.mean(a) == (0.0 + G._pairwise(a, 0, n)) / n
+
+
+def test_output_with_walls_is_the_concatenation():
+    """pipeline._with_walls (issue 26) gives circles.concat(wall_obstacles(points, cov)) bit for bit: with circles
+    and wall points, and with either empty."""
+    from bigcbf.types import Obstacles
+    rng = np.random.default_rng(8)
+    for k, m in ((3, 5), (0, 4), (2, 0), (0, 0)):
+        circles = (Obstacles(rng.normal(size=(k, 2)), rng.normal(size=(k, 2)), rng.normal(size=(k, 2, 2)),
+                             rng.uniform(0.1, 0.5, k), rng.random(k) < 0.5, rng.permutation(9)[:k]) if k
+                   else Obstacles.empty())
+        pts, cov = rng.normal(size=(m, 2)), rng.normal(size=(m, 2, 2))
+        want = circles.concat(pipeline.wall_obstacles(pts, cov))
+        got = Obstacles(*pipeline._with_walls(circles.p, circles.v, circles.cov, circles.r, circles.static,
+                                              circles.ids, pts, cov))
+        for f in ("p", "v", "cov", "r", "static", "ids"):
+            a, b = getattr(got, f), getattr(want, f)
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), f
