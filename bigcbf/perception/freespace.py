@@ -173,16 +173,11 @@ class FreeSpace:
         cap = len(self._stamps)
         if self._count == cap or sp.n_beams > self._past.shape[1]:
             self._alloc(2 * cap if self._count == cap else cap, max(sp.n_beams, self._past.shape[1]))
-            cap = len(self._stamps)
-        s = (self._start + self._count) % cap
-        self._count += 1
-        self._stamps[s], self._a0[s] = float(scan.stamp), float(scan.angle_min) + theta_odom
-        self._inc[s], self._sensors[s], self._nb[s] = sp.angle_increment, sp.sensor, sp.n_beams
-        row = self._past[s]
-        row[:] = np.nan
-        row[sp.beam] = sp.ranges
         keep = 1.5 * self.params.free_space_history_s          # the oldest scan a test may use
-        self._start, self._count = _evict(self._stamps, self._start, self._count, float(scan.stamp - keep))
+        self._start, self._count = _push(self._stamps, self._sensors, self._a0, self._inc, self._nb, self._past,
+                                         self._start, self._count, float(scan.stamp), sp.sensor,
+                                         float(scan.angle_min) + theta_odom, sp.angle_increment, sp.n_beams, sp.beam,
+                                         sp.ranges, float(scan.stamp - keep))
 
     def split(self, sp: ScanPoints, clusters: list, is_compact: np.ndarray,
               stamp: float) -> tuple[list, np.ndarray]:
@@ -227,9 +222,17 @@ class FreeSpace:
 
 
 @kernel
-def _evict(stamps, start, count, oldest):
-    """The ring (``start``, ``count``) without its scans stamped before ``oldest``, oldest first: (start, count)."""
+def _push(stamps, sensors, a0s, incs, nbs, past, start, count, stamp, sensor, a0, inc, nb, beam, ranges, oldest):
+    """:meth:`FreeSpace.add` into the ring (``start``, ``count``; a free slot after its last scan): the scan's
+    stamp, sensor, beam-0 bearing, beam spacing, beam count and ranges (NaN where a beam did not return), then the
+    scans stamped before ``oldest`` dropped, oldest first. Returns the ring's (start, count)."""
     cap = stamps.shape[0]
+    s = (start + count) % cap
+    count += 1
+    stamps[s], sensors[s, 0], sensors[s, 1], a0s[s], incs[s], nbs[s] = stamp, sensor[0], sensor[1], a0, inc, nb
+    past[s, :] = np.nan
+    for i in range(beam.shape[0]):
+        past[s, beam[i]] = ranges[i]
     while count > 0 and stamps[start] < oldest:
         start = (start + 1) % cap
         count -= 1

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,26 +53,26 @@ def scan_to_points(scan: LaserScan, pose: tuple[float, float, float], params: Pe
     """
     r = np.ascontiguousarray(scan.ranges, dtype=float)
     n = len(r)
-    x, y, th = (float(v) for v in pose)
+    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
     c, s = math.cos(th), math.sin(th)
-    sensor = np.array([x + c * params.laser_x_m - s * params.laser_y_m, y + s * params.laser_x_m + c * params.laser_y_m])
-    beam, xy = np.empty(n, np.int64), np.empty((n, 2))
+    sx, sy = x + c * params.laser_x_m - s * params.laser_y_m, y + s * params.laser_x_m + c * params.laser_y_m
+    beam, xy, rv = np.empty(n, np.int64), np.empty((n, 2)), np.empty(n)
     k = _scan_points(r, float(scan.range_min), float(scan.range_max), float(scan.angle_min),
-                     float(scan.angle_increment), float(params.laser_yaw_rad), th, float(sensor[0]),
-                     float(sensor[1]), beam, xy)
-    return ScanPoints(xy[:k], r[beam[:k]], beam[:k], sensor, float(scan.angle_increment), n)
+                     float(scan.angle_increment), float(params.laser_yaw_rad), th, sx, sy, beam, xy, rv)
+    return ScanPoints(xy[:k], rv[:k], beam[:k], np.array([sx, sy]), float(scan.angle_increment), n)
 
 
 @kernel
-def _scan_points(r, range_min, range_max, angle_min, angle_increment, yaw_l, th, sx, sy, beam, xy):
-    """:func:`scan_to_points`' valid beams (finite, within [range_min, range_max]) into beam[:k] and their points
-    sensor + r (cos a, sin a), a = angle_min + i angle_increment + yaw_l + theta, into xy[:k]; returns k."""
+def _scan_points(r, range_min, range_max, angle_min, angle_increment, yaw_l, th, sx, sy, beam, xy, rv):
+    """:func:`scan_to_points`' valid beams (finite, within [range_min, range_max]) into beam[:k], their ranges into
+    rv[:k] and their points sensor + r (cos a, sin a), a = angle_min + i angle_increment + yaw_l + theta, into
+    xy[:k]; returns k."""
     k = 0
     for i in range(r.shape[0]):
         ri = r[i]
         if math.isfinite(ri) and ri >= range_min and ri <= range_max:
             a = angle_min + angle_increment * i + yaw_l + th
-            beam[k] = i
+            beam[k], rv[k] = i, ri
             xy[k, 0] = sx + ri * math.cos(a)
             xy[k, 1] = sy + ri * math.sin(a)
             k += 1
@@ -106,12 +107,18 @@ def cluster_points(sp: ScanPoints, params: PerceptionParams) -> list[Cluster]:
     order, bounds, occ = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.bool_)   # (filled in place:
     nb = _cluster_kernel(np.ascontiguousarray(sp.xy), np.ascontiguousarray(sp.ranges, dtype=float),  # no boxing)
                          np.ascontiguousarray(sp.beam, dtype=np.int64), int(sp.n_beams), dphi, lam,
-                         float(np.sin(dphi)), float(np.sin(max(lam - dphi, 1e-9))), float(params.cluster_dist_m),
+                         *_sines(float(dphi), float(lam)), float(params.cluster_dist_m),
                          float(params.range_sigma_m), float(params.range_sigma_frac), order, bounds, occ)
     if nb < 0:                                                                     # (numpy's sines, as before)
         return [Cluster(np.arange(n), False)]
     cuts = [0, *bounds[:nb].tolist(), n]                      # the segments as views of ``order``, as np.split
-    return [Cluster(order[cuts[s]:cuts[s + 1]], bool(occ[s])) for s in range(nb + 1)]
+    return [Cluster(order[cuts[s]:cuts[s + 1]], o) for s, o in enumerate(occ[:nb + 1].tolist())]
+
+
+@lru_cache(maxsize=64)
+def _sines(dphi: float, lam: float) -> tuple[float, float]:
+    """numpy's sin(dphi) and sin(max(lam - dphi, 1e-9)) of :func:`cluster_points`, once per (dphi, lam)."""
+    return float(np.sin(dphi)), float(np.sin(max(lam - dphi, 1e-9)))
 
 
 @kernel
@@ -607,8 +614,9 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         A, behind, sx, sy, float(sp.angle_increment), float(pr.range_sigma_m), float(pr.range_sigma_frac),
         float(pr.radius_min_m), float(pr.radius_max_m), float(pr.fit_min_arc_rad), float(pr.fit_span_ratio),
         _COARSE, _COARSE_COS, _COARSE_SIN, _FINE)
-    for j in np.flatnonzero(clamped).tolist():            # a won circle of clamped radius (rare): numpy's inverse
-        cov[j] = _clamped_circle_cov(A[0, j], A[1, j], A[2, j], c[j], sp.sensor, pr)
+    if clamped.any():                                     # a won circle of clamped radius (rare): numpy's inverse
+        for j in np.flatnonzero(clamped).tolist():
+            cov[j] = _clamped_circle_cov(A[0, j], A[1, j], A[2, j], c[j], sp.sensor, pr)
     return Measurements(P, n, idx, occluded, center, radius, arc_fit, cov, rms_w, sigma, round_), dents
 
 

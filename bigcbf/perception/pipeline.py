@@ -248,7 +248,8 @@ class Perception:
         odom at that stamp; returns the obstacle estimates in odom (tracks, then wall points)."""
         t0 = time.perf_counter()
         pr = self.params
-        if len(pose) != 3 or not all(math.isfinite(float(v)) for v in pose):
+        if len(pose) != 3 or not (math.isfinite(float(pose[0])) and math.isfinite(float(pose[1]))
+                                  and math.isfinite(float(pose[2]))):
             raise ValueError(f"pose must be three finite numbers (x, y, theta), got {pose!r}")
         if not math.isfinite(scan.stamp):
             raise ValueError(f"scan stamp must be finite, got {scan.stamp!r}")

@@ -187,6 +187,26 @@ def _missed(rows, t, coast, tentative_max, misses, confirmed, last_hit):
 
 
 @kernel
+def _plus_eye(A, c):
+    """A + c I for 2x2 matrices A (n, 2, 2), as numpy's ``A + c * np.eye(2)`` (c * 0 added off the diagonal)."""
+    out = np.empty_like(A)
+    off = c * 0.0
+    for i in range(A.shape[0]):
+        out[i, 0, 0], out[i, 1, 1] = A[i, 0, 0] + c * 1.0, A[i, 1, 1] + c * 1.0
+        out[i, 0, 1], out[i, 1, 0] = A[i, 0, 1] + off, A[i, 1, 0] + off
+    return out
+
+
+@kernel
+def _gated(rows, cols, ok):
+    """The assigned pairs (rows[k], cols[k]) that pass the gate ``ok``, in order."""
+    keep = np.empty(rows.shape[0], np.bool_)
+    for k in range(rows.shape[0]):
+        keep[k] = ok[rows[k], cols[k]]
+    return rows[keep], cols[keep]
+
+
+@kernel
 def _sym2_lmax(a, b, c):
     """The largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]] (closed form)."""
     return 0.5 * (a + c) + math.sqrt(0.25 * (a - c) * (a - c) + b * b)
@@ -415,17 +435,16 @@ class Tracker:
         if self.t is not None and len(self) and t > self.t:
             F, Q = cv_model(float(t - self.t), float(self.params.accel_psd_m2ps3))
             _predict_tracks(self.x, self.P, F, Q)
-            self.Ps = self.Ps + (self.params.static_pos_psd_m2ps * (t - self.t)) * np.eye(2)
+            self.Ps = _plus_eye(self.Ps, self.params.static_pos_psd_m2ps * (t - self.t))
         self.t = t
 
     def measurement_covariance(self, cov: np.ndarray | None, m: int) -> np.ndarray:
         """R (m, 2, 2) [m^2] of m cluster centres: their fit covariance ``cov`` (``geometry.measure_compact``; none
         given: 0) plus fit_model_sigma_m^2 I (what the fit's own covariance leaves out: the object's shape is not
         exactly the model's, the scan is not instantaneous)."""
-        floor = self.params.fit_model_sigma_m ** 2 * np.eye(2)
         if cov is None:
-            return np.broadcast_to(floor, (m, 2, 2)).copy()
-        return np.asarray(cov, float).reshape(m, 2, 2) + floor
+            return np.broadcast_to(self.params.fit_model_sigma_m ** 2 * np.eye(2), (m, 2, 2)).copy()
+        return _plus_eye(np.asarray(cov, float).reshape(m, 2, 2), self.params.fit_model_sigma_m ** 2)
 
     def surface_owner(self, points: np.ndarray) -> np.ndarray:
         """(n,) int: for each point (n, 2), the index (into the track arrays) of the confirmed track on whose
@@ -451,8 +470,7 @@ class Tracker:
               np.ascontiguousarray(self.r), float(pr.gate_chi2), float(pr.gate_min_m), float(pr.gate_max_m),
               float(pr.gate_radius_m), _INFEASIBLE, cost, ok)
         rows, cols = linear_sum_assignment(cost)
-        good = ok[rows, cols]
-        return rows[good], cols[good]
+        return _gated(rows, cols, ok)
 
     def step(self, t: float, z: np.ndarray, radii: np.ndarray, robot_xy: np.ndarray, cov: np.ndarray | None = None,
              round_: np.ndarray | None = None, surface: list | None = None) -> np.ndarray:

@@ -172,3 +172,20 @@ def test_report_and_misses_compiled_match_their_numpy_form():
         got, every = _missed(rows, t, float(pr.coast_s + 1e-9), int(pr.tentative_max_misses), T.misses,
                              T.confirmed, T.last_hit)
         assert np.array_equal(T.misses, want) and np.array_equal(got, alive) and every == alive.all()
+
+
+def test_small_kernels_are_their_numpy_expressions():
+    """tracker._plus_eye is numpy's A + c * np.eye(2) bit for bit (signed zeros off the diagonal, c of either
+    sign), and tracker._gated keeps the assigned pairs that pass the gate, in order, as rows[ok[rows, cols]]."""
+    from bigcbf.perception.tracker import _gated, _plus_eye
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 2, 2))
+    A[0, 0, 1], A[1, 1, 0], A[2, 0, 0] = -0.0, 0.0, -0.0
+    for c in (0.0, 0.0025, -0.5, 3.0):
+        got, want = _plus_eye(A, c), A + c * np.eye(2)
+        assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
+    ok = rng.random((5, 4)) < 0.5
+    rows, cols = np.array([0, 1, 3, 4]), np.array([2, 0, 3, 1])
+    keep = ok[rows, cols]
+    r, c = _gated(rows, cols, ok)
+    assert np.array_equal(r, rows[keep]) and np.array_equal(c, cols[keep])
