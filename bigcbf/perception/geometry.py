@@ -303,24 +303,30 @@ _COARSE_COS, _COARSE_SIN = np.ascontiguousarray(_COARSE_E1[:, 0]), np.ascontiguo
 def _rect_search(P, lo, n, e1x, e1y, e2x, e2y, best):
     """For orientations k (unit axes (e1x[k], e1y[k]), (e2x[k], e2y[k])): the sum over the points P[lo:lo+n] of the
     squared distance to the nearest edge of their bounding rectangle (``fit_rectangle``'s criterion); returns the
-    first k with the least sum, and fills best = (amin, amax, bmin, bmax, sum) of it."""
+    first k with the least sum, and fills best = (amin, amax, bmin, bmax, sum) of it. Point by point, all
+    orientations at once (each one's limits and sum in point order, as one orientation at a time)."""
+    K = e1x.shape[0]
+    amin, bmin = np.full(K, np.inf), np.full(K, np.inf)
+    amax, bmax = np.full(K, -np.inf), np.full(K, -np.inf)
+    ss = np.zeros(K)
+    for i in range(lo, lo + n):
+        px, py = P[i, 0], P[i, 1]
+        for k in range(K):
+            a = e1x[k] * px + e1y[k] * py
+            b = e2x[k] * px + e2y[k] * py
+            amin[k], amax[k], bmin[k], bmax[k] = min(amin[k], a), max(amax[k], a), min(bmin[k], b), max(bmax[k], b)
+    for i in range(lo, lo + n):
+        px, py = P[i, 0], P[i, 1]
+        for k in range(K):
+            a = e1x[k] * px + e1y[k] * py
+            b = e2x[k] * px + e2y[k] * py
+            d = min(min(a - amin[k], amax[k] - a), min(b - bmin[k], bmax[k] - b))
+            ss[k] += d * d
     kbest = -1
-    for k in range(e1x.shape[0]):
-        amin = bmin = np.inf
-        amax = bmax = -np.inf
-        for i in range(lo, lo + n):
-            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
-            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
-            amin, amax, bmin, bmax = min(amin, a), max(amax, a), min(bmin, b), max(bmax, b)
-        ss = 0.0
-        for i in range(lo, lo + n):
-            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
-            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
-            d = min(min(a - amin, amax - a), min(b - bmin, bmax - b))
-            ss += d * d
-        if kbest < 0 or ss < best[4]:
+    for k in range(K):
+        if kbest < 0 or ss[k] < best[4]:
             kbest = k
-            best[0], best[1], best[2], best[3], best[4] = amin, amax, bmin, bmax, ss
+            best[0], best[1], best[2], best[3], best[4] = amin[k], amax[k], bmin[k], bmax[k], ss[k]
     return kbest
 
 
@@ -606,18 +612,23 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
         return Measurements(P, n, idx, occluded, np.zeros((0, 2)), z, np.zeros(0, bool), np.zeros((0, 2, 2)), z, z,
                             np.zeros(0, bool)), z
     sx, sy = float(sp.sensor[0]), float(sp.sensor[1])
-    c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg, sin_arg = _fits(
-        P, n, sx, sy, float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_min_m),
-        float(pr.radius_max_m), float(sp.angle_increment))
-    center, radius, arc_fit, cov, rms_w, round_, clamped = _models(
-        P, n, np.arctan2(ay, ax), np.arccos(cos_arg), np.arcsin(sin_arg), occluded, c, r, rms, tol, sigma, fitted,
-        A, behind, sx, sy, float(sp.angle_increment), float(pr.range_sigma_m), float(pr.range_sigma_frac),
-        float(pr.radius_min_m), float(pr.radius_max_m), float(pr.fit_min_arc_rad), float(pr.fit_span_ratio),
-        _COARSE, _COARSE_COS, _COARSE_SIN, _FINE)
+    fit, A, dents, ay, ax, cos_arg, sin_arg = _fits(P, n, sx, sy, float(pr.range_sigma_m), float(pr.range_sigma_frac),
+                                                    float(pr.radius_min_m), float(pr.radius_max_m),
+                                                    float(sp.angle_increment))
+    center, radius, arc_fit, cov, rms, round_, clamped = _models(
+        P, n, np.arctan2(ay, ax), np.arccos(cos_arg), np.arcsin(sin_arg), occluded, fit, A, sx, sy,
+        float(sp.angle_increment), float(pr.range_sigma_m), float(pr.range_sigma_frac), float(pr.radius_min_m),
+        float(pr.radius_max_m), float(pr.fit_min_arc_rad), float(pr.fit_span_ratio), _COARSE, _COARSE_COS,
+        _COARSE_SIN, _FINE)
     if clamped.any():                                     # a won circle of clamped radius (rare): numpy's inverse
         for j in np.flatnonzero(clamped).tolist():
-            cov[j] = _clamped_circle_cov(A[0, j], A[1, j], A[2, j], c[j], sp.sensor, pr)
-    return Measurements(P, n, idx, occluded, center, radius, arc_fit, cov, rms_w, sigma, round_), dents
+            cov[j] = _clamped_circle_cov(A[0, j], A[1, j], A[2, j], fit[:2, j], sp.sensor, pr)
+    return Measurements(P, n, idx, occluded, center, radius, arc_fit, cov, rms, fit[_SIGMA], round_), dents
+
+
+#: the rows of :func:`_fits`' per-cluster results: centre x, y, radius, RMS residual, tie tolerance, range noise's
+#: std, radius fitted (1) or clamped (0), centre behind the nearest point (1) or not (0)
+_CX, _CY, _R, _RMS, _TOL, _SIGMA, _FITTED, _BEHIND = range(8)
 
 
 @kernel
@@ -625,8 +636,8 @@ def _fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, dphi):
     """The first part of :func:`measure_clusters` over clusters of n[j] points of P seen from (sx, sy): the
     algebraic circle fits (:func:`_kasa_fits`), the radius clamped and the centre refitted where the fit is not
     usable (:func:`_fixed_radius_fit`, 10 iterations from the nearest point pushed back by the radius along its
-    ray), then :func:`_arc_terms`. Returns (c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg,
-    sin_arg)."""
+    ray), then :func:`_arc_terms`. Returns (fit (8, m): the per-cluster results, rows ``_CX`` ... ``_BEHIND``;
+    A, dents, ay, ax, cos_arg, sin_arg as :func:`_arc_terms`)."""
     m, N = n.shape[0], P.shape[0]
     near, ray, c = np.empty((m, 2)), np.empty((m, 2)), np.empty((m, 2))
     sigma, r, rms, tol, fitted = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.bool_)
@@ -645,18 +656,23 @@ def _fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, dphi):
     ay, ax, A, dents = np.empty(N), np.empty(N), np.empty((6, m)), np.zeros(m)
     behind, cos_arg, sin_arg = np.empty(m, np.bool_), np.empty(m), np.empty(m)
     _arc_terms(P, n, c, near, ray, r, sx, sy, dphi, sigma0, sigma_frac, ay, ax, A, dents, behind, cos_arg, sin_arg)
-    return c, r, rms, tol, sigma, fitted, A, dents, behind, ay, ax, cos_arg, sin_arg
+    fit = np.empty((8, m))
+    for j in range(m):
+        fit[_CX, j], fit[_CY, j], fit[_R, j], fit[_RMS, j] = c[j, 0], c[j, 1], r[j], rms[j]
+        fit[_TOL, j], fit[_SIGMA, j] = tol[j], sigma[j]
+        fit[_FITTED, j], fit[_BEHIND, j] = 1.0 if fitted[j] else 0.0, 1.0 if behind[j] else 0.0
+    return fit, A, dents, ay, ax, cos_arg, sin_arg
 
 
 @kernel
-def _models(P, n, ang, acos, asin, occluded, c, r, rms, tol, sigma, fitted, A, behind, sx, sy, dphi, sigma0,
-            sigma_frac, r_min, r_max, min_arc, span_ratio, coarse, ccos, csin, fine):
+def _models(P, n, ang, acos, asin, occluded, fit, A, sx, sy, dphi, sigma0, sigma_frac, r_min, r_max, min_arc,
+            span_ratio, coarse, ccos, csin, fine):
     """The second part of :func:`measure_clusters`: the arc spans (:func:`_arc_need`), then per cluster the model
     that wins (:func:`measure_compact`'s rule: the rectangle fit :func:`_rect_fit` unless the circle fits within
     the noise ``tol``) and its measurement: the circle's (its covariance :func:`_fitted_circle_cov` when its radius
     was fitted; ``clamped`` marks those whose radius was clamped, left to the caller) or the rectangle's (radius
-    clipped to [r_min, r_max], covariance :func:`_rect_cov`). Returns (center, radius, arc_fit, cov, rms, round,
-    clamped)."""
+    clipped to [r_min, r_max], covariance :func:`_rect_cov`); ``fit``: :func:`_fits`' per-cluster results. Returns
+    (center, radius, arc_fit, cov, rms, round, clamped)."""
     m = n.shape[0]
     span, need = np.empty(m), np.empty(m)
     _arc_need(ang, n, acos, asin, occluded, min_arc, span_ratio, span, need)
@@ -666,15 +682,16 @@ def _models(P, n, ang, acos, asin, occluded, c, r, rms, tol, sigma, fitted, A, b
     lo = 0
     for j in range(m):
         nj = n[j]
+        cx, cy, r, rms, tol = fit[_CX, j], fit[_CY, j], fit[_R, j], fit[_RMS, j], fit[_TOL, j]
         fitted_rect = False
         rms_rect = np.inf
-        if not (tol[j] > 0 and rms[j] <= tol[j]):
+        if not (tol > 0 and rms <= tol):
             _rect_fit(P, lo, nj, sx, sy, coarse, ccos, csin, fine, rect)
             fitted_rect, rms_rect = True, rect[3]
-        if rms[j] <= rms_rect + tol[j] and behind[j] and span[j] >= need[j]:
-            center[j, 0], center[j, 1], radius[j], rms_w[j] = c[j, 0], c[j, 1], r[j], rms[j]
-            arc_fit[j], round_[j] = True, rms[j] <= rms_rect
-            if fitted[j]:
+        if rms <= rms_rect + tol and fit[_BEHIND, j] != 0.0 and span[j] >= need[j]:
+            center[j, 0], center[j, 1], radius[j], rms_w[j] = cx, cy, r, rms
+            arc_fit[j], round_[j] = True, rms <= rms_rect
+            if fit[_FITTED, j] != 0.0:
                 _fitted_circle_cov(A[0, j], A[1, j], A[2, j], A[3, j], A[4, j], A[5, j], r_max, cov[j])
             else:
                 clamped[j] = True

@@ -715,3 +715,50 @@ def test_output_with_walls_is_the_concatenation():
         for f in ("p", "v", "cov", "r", "static", "ids"):
             a, b = getattr(got, f), getattr(want, f)
             assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), f
+
+
+def ref_rect_search(P, lo, n, e1x, e1y, e2x, e2y, best):
+    """geometry._rect_search as of 96c6b28 (one orientation at a time), run as Python."""
+    kbest = -1
+    for k in range(e1x.shape[0]):
+        amin = bmin = np.inf
+        amax = bmax = -np.inf
+        for i in range(lo, lo + n):
+            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
+            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
+            amin, amax, bmin, bmax = min(amin, a), max(amax, a), min(bmin, b), max(bmax, b)
+        ss = 0.0
+        for i in range(lo, lo + n):
+            a = e1x[k] * P[i, 0] + e1y[k] * P[i, 1]
+            b = e2x[k] * P[i, 0] + e2y[k] * P[i, 1]
+            d = min(min(a - amin, amax - a), min(b - bmin, bmax - b))
+            ss += d * d
+        if kbest < 0 or ss < best[4]:
+            kbest = k
+            best[0], best[1], best[2], best[3], best[4] = amin, amax, bmin, bmax, ss
+    return kbest
+
+
+def test_rectangle_search_all_orientations_at_once_is_one_at_a_time():
+    """geometry._rect_search (issue 26: the orientations in the inner loop) gives the orientation, limits and sum
+    of its former form bit for bit, on the coarse and a fine set of axes, for noisy L-shapes, faces and arcs,
+    including ties (a square seen square-on)."""
+    rng = np.random.default_rng(21)
+    c, s = G._COARSE_COS, G._COARSE_SIN
+    fine = np.deg2rad(37.0) + G._FINE
+    fc, fs = np.cos(fine), np.sin(fine)
+    for trial in range(120):
+        n = int(rng.integers(3, 40))
+        if trial % 3 == 0:
+            P = np.cumsum(rng.normal(size=(n, 2)) * 0.03, axis=0)
+        elif trial % 3 == 1:
+            th = rng.uniform(0, 2 * np.pi, n)
+            P = rng.uniform(0.05, 0.4) * np.column_stack([np.cos(th), np.sin(th)])
+        else:
+            P = np.column_stack([np.r_[np.zeros(n // 2), np.linspace(0, 0.5, n - n // 2)],
+                                 np.r_[np.linspace(0, 0.5, n // 2), np.zeros(n - n // 2)]])
+        P = np.ascontiguousarray(np.r_[rng.normal(size=(2, 2)), P + rng.uniform(-5, 5, 2)])
+        for axes in ((c, s, -s, c), (fc, fs, -fs, fc)):
+            got, want = np.full(5, np.nan), np.full(5, np.nan)
+            assert G._rect_search(P, 2, n, *axes, got) == ref_rect_search(P, 2, n, *axes, want)
+            assert np.array_equal(got, want)
