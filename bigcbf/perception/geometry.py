@@ -984,17 +984,16 @@ def wall_candidates_many(point_sets: list, robot_xy: np.ndarray, spacing: float)
     if not sets:
         return np.zeros((0, 2))
     n = np.array([len(q) for q in sets], np.int64)
-    Q = np.ascontiguousarray(np.concatenate(sets), dtype=float)
-    sel = np.empty(len(Q), np.int64)
-    k = _wall_candidates_kernel(Q, n, float(robot_xy[0]), float(robot_xy[1]), float(spacing), sel)
-    return Q[sel[:k]]
+    return _wall_candidates_kernel(np.ascontiguousarray(np.concatenate(sets), dtype=float), n, float(robot_xy[0]),
+                                   float(robot_xy[1]), float(spacing))
 
 
 @kernel
-def _wall_candidates_kernel(Q, n, rx, ry, spacing, out):
-    """The indices into Q (into ``out``; returns how many) of :func:`wall_candidates_many`'s points, cluster by cluster (n[c] points each), each
-    one's nearest point first; the path length is one cumulative sum over all of Q, as in numpy."""
+def _wall_candidates_kernel(Q, n, rx, ry, spacing):
+    """:func:`wall_candidates_many`'s points of Q (clusters of n[c] points), cluster by cluster, each one's nearest
+    point first; the path length is one cumulative sum over all of Q, as in numpy."""
     N = Q.shape[0]
+    out = np.empty(N, np.int64)
     cs = np.empty(N)             # the cumulative sum of the steps, 0 at each cluster's first point
     acc = 0.0
     nxt_start, c = 0, 0
@@ -1038,7 +1037,16 @@ def _wall_candidates_kernel(Q, n, rx, ry, spacing, out):
                 k += 1
             prev_bin = b_i
         start = end + 1
-    return k
+    return _take(Q, out, k)
+
+
+@kernel
+def _take(points, sel, k):
+    """points[sel[:k]] (rows of (N, 2) points)."""
+    res = np.empty((k, 2))
+    for q in range(k):
+        res[q, 0], res[q, 1] = points[sel[q], 0], points[sel[q], 1]
+    return res
 
 
 def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np.ndarray:
@@ -1087,18 +1095,16 @@ def select_wall_points(candidates: np.ndarray, robot_xy: np.ndarray, params: Per
     """The at most wall_max_points candidates nearest to the robot, within wall_range_m, nearest first."""
     if len(candidates) == 0 or params.wall_max_points == 0:
         return np.zeros((0, 2))
-    candidates = np.ascontiguousarray(candidates, dtype=float)
-    sel = np.empty(len(candidates), np.int64)
-    k = _nearest_within(candidates, float(robot_xy[0]), float(robot_xy[1]), float(params.wall_range_m),
-                        int(params.wall_max_points), sel)
-    return candidates[sel[:k]]
+    return _nearest_within(np.ascontiguousarray(candidates, dtype=float), float(robot_xy[0]), float(robot_xy[1]),
+                           float(params.wall_range_m), int(params.wall_max_points))
 
 
 @kernel
-def _nearest_within(points, rx, ry, reach, most, out):
-    """:func:`select_wall_points`' choice into ``out`` (returns how many): the points within ``reach`` of (rx, ry),
-    nearest first (a stable sort: ties in the given order), at most ``most``."""
+def _nearest_within(points, rx, ry, reach, most):
+    """:func:`select_wall_points`' choice: the points within ``reach`` of (rx, ry), nearest first (a stable sort:
+    ties in the given order), at most ``most``."""
     n = points.shape[0]
+    out = np.empty(n, np.int64)
     d = np.empty(n)
     for i in range(n):
         dx, dy = points[i, 0] - rx, points[i, 1] - ry
@@ -1111,7 +1117,7 @@ def _nearest_within(points, rx, ry, reach, most, out):
         if d[i] <= reach:
             out[k] = i
             k += 1
-    return k
+    return _take(points, out, k)
 
 
 def wall_point_covariance(points: np.ndarray, sensor: np.ndarray, angle_increment: float,
