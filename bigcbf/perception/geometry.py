@@ -1059,32 +1059,31 @@ def compact_mask(sp: ScanPoints, clusters: list, params: PerceptionParams) -> np
         return np.zeros(0, bool)
     limit = params.compact_max_extent_m
     n = np.array([len(c.idx) for c in clusters], np.int64)
-    P = np.ascontiguousarray(sp.xy[np.concatenate([c.idx for c in clusters])])
     ok = np.empty(m, np.bool_)
-    _compact_kernel(P, n, float(limit), int(params.min_points), ok)
+    _compact_kernel(sp.xy, np.concatenate([c.idx for c in clusters]), n, float(limit), int(params.min_points), ok)
     return ok
 
 
 @kernel
-def _compact_kernel(P, n, limit, min_points, ok):
-    """:func:`compact_mask` into ``ok`` over the concatenated points P of clusters of n[c] points (:func:`extent`
-    inlined)."""
+def _compact_kernel(xy, idx, n, limit, min_points, ok):
+    """:func:`compact_mask` into ``ok`` over the points xy[idx] of clusters of n[c] points (their indices
+    concatenated in ``idx``; :func:`extent` inlined)."""
     m = n.shape[0]
     start = 0
     for c in range(m):
         k = n[c]
-        fx, fy = P[start, 0], P[start, 1]
+        fx, fy = xy[idx[start], 0], xy[idx[start], 1]
         e1 = -np.inf
         for i in range(start, start + k):
-            d = math.sqrt((P[i, 0] - fx) ** 2 + (P[i, 1] - fy) ** 2)
+            d = math.sqrt((xy[idx[i], 0] - fx) ** 2 + (xy[idx[i], 1] - fy) ** 2)
             e1 = d if d > e1 or d != d else e1
         ok[c] = k >= min_points and e1 <= limit
         if ok[c] and e1 > limit / 2 and k <= 400:     # extent(): the pairwise distances
             best = -np.inf
             for i in range(start, start + k):
                 for j in range(start, start + k):
-                    dx = P[i, 0] - P[j, 0]
-                    dy = P[i, 1] - P[j, 1]
+                    dx = xy[idx[i], 0] - xy[idx[j], 0]
+                    dy = xy[idx[i], 1] - xy[idx[j], 1]
                     v = dx * dx + dy * dy
                     best = v if v > best or v != v else best
             ok[c] = math.sqrt(best) <= limit
