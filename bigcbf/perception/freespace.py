@@ -186,7 +186,7 @@ class FreeSpace:
         pr = self.params
         if pr.free_space_history_s <= 0 or not clusters or bool(is_compact.all()) or not self._count:
             return clusters, is_compact
-        ext = np.flatnonzero(~is_compact).tolist()
+        ext = [k for k, c in enumerate(is_compact.tolist()) if not c]
         idx = [clusters[k].idx for k in ext]
         found = _carve(sp.xy, sp.ranges, np.concatenate(idx), np.array([len(i) for i in idx], np.int64),
                        self._stamps, self._start, self._count, float(stamp), float(pr.free_space_history_s),

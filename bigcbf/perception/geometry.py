@@ -605,7 +605,7 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     m = len(clusters)
     n = np.array([len(c.idx) for c in clusters], np.int64)
     idx = np.concatenate([c.idx for c in clusters]) if m else np.zeros(0, np.int64)
-    P = np.ascontiguousarray(sp.xy[idx], dtype=float)
+    P = _take(sp.xy, idx, len(idx))
     occluded = np.array([cl.occluded for cl in clusters], np.bool_)
     if m == 0:
         z = np.zeros(0)

@@ -74,7 +74,7 @@ import numpy as np
 from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import LaserScan, Obstacles
-from .geometry import (Cluster, _pairwise, cluster_points, compact_mask, measure_clusters, scan_to_points,
+from .geometry import (Cluster, _pairwise, _take, cluster_points, compact_mask, measure_clusters, scan_to_points,
                        select_wall_points, wall_candidates_many, wall_point_covariance)
 from .freespace import FreeSpace
 from .tracker import Tracker
@@ -266,8 +266,9 @@ class Perception:
         clusters, is_compact = self.free_space.split(sp, clusters, compact_mask(sp, clusters, pr), float(scan.stamp))
         self.free_space.add(scan, sp, float(pose[2]) + pr.laser_yaw_rad)
         clusters, is_compact = self._segment(sp, clusters, is_compact)
-        walls = [sp.xy[cl.idx] for cl, c in zip(clusters, is_compact) if not c]       # point sets, in scan order
-        ms, dents = measure_clusters(sp, [cl for cl, c in zip(clusters, is_compact) if c], pr)
+        flags = is_compact.tolist()
+        walls = [_take(sp.xy, cl.idx, len(cl.idx)) for cl, c in zip(clusters, flags) if not c]    # in scan order
+        ms, dents = measure_clusters(sp, [cl for cl, c in zip(clusters, flags) if c], pr)
         bad = _rejected(ms.points, sp.ranges, ms.idx, ms.n, ms.occluded, ms.arc_fit, ms.rms, ms.rms_expected, dents,
                         float(pr.grazing_spacing_factor * sp.angle_increment), float(pr.fit_rms_ratio_max),
                         float(pr.concavity_ratio_max))
