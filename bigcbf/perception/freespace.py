@@ -63,13 +63,23 @@ def in_free_space(xy, ranges, sensors, a0, inc, past, n_beams, rows, margin, sig
             dx = xy[i, 0] - sensors[h, 0]
             dy = xy[i, 1] - sensors[h, 1]
             r = math.sqrt(dx * dx + dy * dy)
-            a = (math.atan2(dy, dx) - a0[h]) % two_pi
+            a = math.atan2(dy, dx) - a0[h]
+            if a < 0.0 and a >= -two_pi:                # a % two_pi, as Python's float mod gives it, cheaper
+                a += two_pi
+            elif not (a >= 0.0 and a < two_pi):
+                a = a % two_pi
             j = int(math.floor(a / inc[h]))
             nb = n_beams[h]
             j2 = j + 1
-            if full[q]:
-                j = j % nb
-                j2 = j2 % nb
+            if full[q]:                                 # j % nb and j2 % nb
+                if j >= 0 and j2 < 2 * nb:
+                    if j >= nb:
+                        j -= nb
+                    if j2 >= nb:
+                        j2 -= nb
+                else:
+                    j = j % nb
+                    j2 = j2 % nb
             elif j < 0 or j2 >= nb:
                 continue
             r1, r2 = past[h, j], past[h, j2]

@@ -31,6 +31,47 @@ def _drive(params, walker=True, steps=40, noise=0.01):
     return out
 
 
+def _in_free_space_plain(xy, ranges, sensors, a0, inc, past, n_beams, rows, margin, sigma0, sigma_frac):
+    """The free-space test written plainly in Python (the bearing's and the beam indices' wrap by ``%``): the
+    reference the compiled kernel, whose wraps take the cheaper branch where they can, must equal."""
+    out = np.zeros(len(xy), bool)
+    for i in range(len(xy)):
+        need = margin + 3.0 * (sigma0 + sigma_frac * ranges[i])
+        for h in rows:
+            dx, dy = xy[i, 0] - sensors[h, 0], xy[i, 1] - sensors[h, 1]
+            r = math.sqrt(dx * dx + dy * dy)
+            j = int(math.floor(((math.atan2(dy, dx) - a0[h]) % (2.0 * math.pi)) / inc[h]))
+            nb, j2 = int(n_beams[h]), j + 1
+            if n_beams[h] * inc[h] >= 2.0 * math.pi - 1e-6:
+                j, j2 = j % nb, j2 % nb
+            elif j < 0 or j2 >= nb:
+                continue
+            r1, r2 = past[h, j], past[h, j2]
+            if not (math.isnan(r1) or math.isnan(r2)) and min(r1, r2) > r + need:
+                out[i] = True
+                break
+    return out
+
+
+def test_the_free_space_kernel_equals_the_plain_test():
+    """Random points and stored scans (360-degree and partial, bearings of beam 0 far outside [-2 pi, 2 pi), beams
+    without a return): the kernel's booleans are the plain form's, case by case."""
+    rng = np.random.default_rng(7)
+    for k in range(60):
+        H, B = 5, 360
+        nb = rng.choice([360, 270, 181], H).astype(np.int64)
+        inc = np.where(nb == 360, 2.0 * np.pi / 360, rng.uniform(0.004, 0.02, H))
+        past = rng.uniform(0.3, 9.0, (H, B))
+        past[rng.random((H, B)) < 0.1] = np.nan
+        sensors, a0 = rng.uniform(-1.0, 1.0, (H, 2)), rng.uniform(-20.0, 20.0, H)
+        xy = rng.uniform(-6.0, 6.0, (80, 2))
+        args = (xy, np.hypot(xy[:, 0], xy[:, 1]), sensors, a0, inc, past, nb, rng.permutation(H)[:3].astype(np.int64),
+                0.15, 0.01, 0.005)
+        want = _in_free_space_plain(*args)
+        assert np.array_equal(in_free_space(*args), want), k
+        assert 0 < want.sum() < len(want)
+
+
 def test_point_in_free_space_by_hand():
     """One earlier scan from the origin, beams every 90 degrees, all returning at 5 m: a point 2 m along beam 0's
     bearing between beams 0 and 1 (45 degrees) is in free space (both bracketing beams reach 5 m > 2 m + margin);
