@@ -70,7 +70,10 @@ eq:hard_cbf_qp (26) held, with the margins of the command the filter started fro
 when no s is feasible does the step stay infeasible, with the least-violation command and the last resort of u_in's
 problem, as without the switch. It is the paper's rule (margins at the command the filter starts from, held fixed)
 applied to a command the filter has first slowed down: what the hard filter does to an infeasible full-speed
-command anyway, but with the margins of the speed it will have.
+command anyway, but with the margins of the speed it will have. Measured over every method (docs/fidelity.md, "The common
+filter's slowdown"), it frees channels like that one but, with walkers near, the slowed command's margins can be the
+smaller ones and its command moves towards a person: three at-fault contacts on the test split that the
+least-violation command did not have. Hence off by default for every method.
 
 The velocity-aware barrier (``StackParams.cbf_velocity_rows``, off by default): every selected tracked obstacle
 that moves adds one collision-cone row (``bigcbf.control.velocity_barrier``) after the distance rows, with the same

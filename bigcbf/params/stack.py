@@ -360,7 +360,9 @@ class PlusRules:
       with); off: the filter of the run's ``[stack]``. On by default, as issue 23 asks; measured in docs/fidelity.md.
     - ``slowdown`` (issue 25): the common filter of big-cbf-plus's episodes has its slowdown on
       (``StackParams.cbf_slowdown``; the same filter every method can run with, ``--variant cbf_slowdown=off,on``);
-      off: the filter of the run's ``[stack]``. On by default since 2026-11-28 (docs/fidelity.md, "The slowdown").
+      off: the filter of the run's ``[stack]``. Off by default: it freed two dev worlds for big-cbf-plus but none of
+      the test split's or francis2023's, lost one route-off test world, and gave three other methods an at-fault
+      contact each on the test split (docs/fidelity.md, "The common filter's slowdown").
     - ``long_horizon`` (issue 23): the imagination's rollouts run ``long_horizon_s`` (N = long_horizon_s / dt
       steps of eq:behavior_rollout (12)); the paper's N dt is 1.5 s (Table I), which ``big-cbf`` keeps. Every score
       (eq:behavior_terms (13), eq:behavior_cost (14), eq:analytic_workload (24)), the barrier acceptance
@@ -402,7 +404,7 @@ class PlusRules:
     executed_speed: bool = True  # judge a rejected candidate again at slower speeds, same look-ahead [on/off]
     meeting_side: bool = True  # the first side away from a person walking along the path (encounters.py) [on/off]
     velocity_rows: bool = True  # the common filter with its velocity-aware rows (cbf_velocity_rows) [on/off]
-    slowdown: bool = True  # the common filter with its slowdown (cbf_slowdown) [on/off]
+    slowdown: bool = False  # the common filter with its slowdown (cbf_slowdown) [on/off]
     long_horizon: bool = True  # rollouts long_horizon_s long; the extra steps test only movers (off: N dt) [on/off]
     long_horizon_s: float = ranged(2.5, 0.1, 10)  # the rollouts' length with long_horizon [s]
     last_resort: str = "passive"  # the common filter's last resort for this method (cbf_last_resort) [-]

@@ -72,11 +72,11 @@ def test_a_feasible_step_is_untouched_by_the_switch(half_width):
     assert not i_off.infeasible and np.array_equal(u_on, u_off) and i_on.fallback == i_off.fallback
 
 
-def test_plus_runs_the_filter_with_the_slowdown_and_the_paper_does_not():
+def test_the_slowdown_is_off_by_default_and_a_switch_of_every_method():
     p = StackParams()
     assert not p.cbf_slowdown
-    assert filter_params(make_planner("big-cbf-plus", p), p).cbf_slowdown
-    assert not filter_params(make_planner("big-cbf-plus", p, PlusRules(slowdown=False)), p).cbf_slowdown
+    assert not filter_params(make_planner("big-cbf-plus", p), p).cbf_slowdown
+    assert filter_params(make_planner("big-cbf-plus", p, PlusRules(slowdown=True)), p).cbf_slowdown
     for name in ("big-cbf", "cbf-only", "backup-cbf"):
         assert not filter_params(make_planner(name, p), p).cbf_slowdown
     assert filter_params(make_planner("cbf-only", dataclasses.replace(p, cbf_slowdown=True)),
