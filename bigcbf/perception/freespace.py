@@ -32,12 +32,13 @@ between two scans can mark pieces of wall (which then stay wall points, above).
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from ..control.jit import kernel
 from ..params.perception import PerceptionParams
 from ..types import LaserScan
-from .geometry import Cluster, ScanPoints, compact_mask
+from .geometry import Cluster, ScanPoints, _take, compact_mask
 
 
 @kernel
@@ -134,9 +135,7 @@ def _carve(xy, ranges, idx, n, stamps, start, count, stamp, hist, sensors, a0, i
     N = idx.shape[0]
     if h == 0 or N == 0:
         return np.empty((0, 3), np.int64)
-    pts, rng = np.empty((N, 2)), np.empty(N)
-    for i in range(N):
-        pts[i, 0], pts[i, 1], rng[i] = xy[idx[i], 0], xy[idx[i], 1], ranges[idx[i]]
+    pts, rng = _take(xy, idx, N), ranges[idx]
     free = in_free_space(pts, rng, sensors, a0, inc, past, n_beams, rows[:h], margin, sigma0, sigma_frac)
     out = np.empty((N, 3), np.int64)
     k = 0

@@ -626,6 +626,13 @@ def measure_clusters(sp: ScanPoints, clusters: list, params: PerceptionParams) -
     return Measurements(P, n, idx, occluded, center, radius, arc_fit, cov, rms, fit[_SIGMA], round_), dents
 
 
+@kernel
+def _clip(x, lo, hi):
+    """``np.clip`` of one number (NaN stays NaN)."""
+    x = lo if x < lo else x
+    return hi if x > hi else x
+
+
 #: the rows of :func:`_fits`' per-cluster results: centre x, y, radius, RMS residual, tie tolerance, range noise's
 #: std, radius fitted (1) or clamped (0), centre behind the nearest point (1) or not (0)
 _CX, _CY, _R, _RMS, _TOL, _SIGMA, _FITTED, _BEHIND = range(8)
@@ -646,9 +653,7 @@ def _fits(P, n, sx, sy, sigma0, sigma_frac, r_min, r_max, dphi):
     start = 0
     for j in range(m):
         if not fitted[j]:                                  # clamp the radius and refit the centre (rare)
-            rj = r[j] if math.isfinite(r[j]) else r_max
-            rj = r_min if rj < r_min else rj               # np.clip
-            rj = r_max if rj > r_max else rj
+            rj = _clip(r[j] if math.isfinite(r[j]) else r_max, r_min, r_max)
             _fixed_radius_fit(P, start, n[j], rj, near[j, 0] + rj * ray[j, 0], near[j, 1] + rj * ray[j, 1], 10,
                               fit3)
             c[j, 0], c[j, 1], r[j], rms[j] = fit3[0], fit3[1], rj, fit3[2]
@@ -700,9 +705,7 @@ def _models(P, n, ang, acos, asin, occluded, fit, A, sx, sy, dphi, sigma0, sigma
                 _rect_fit(P, lo, nj, sx, sy, coarse, ccos, csin, fine, rect)
             _rect_cov(P, lo, nj, sx, sy, rect[4], rect[5], rect[6], rect[7], rect[8], rect[9], dphi, sigma0,
                       sigma_frac, r_max, cov[j])
-            rr = rect[2]
-            rr = r_min if rr < r_min else rr               # np.clip
-            center[j, 0], center[j, 1], radius[j], rms_w[j] = rect[0], rect[1], r_max if rr > r_max else rr, rect[3]
+            center[j, 0], center[j, 1], radius[j], rms_w[j] = rect[0], rect[1], _clip(rect[2], r_min, r_max), rect[3]
         lo += nj
     return center, radius, arc_fit, cov, rms_w, round_, clamped
 

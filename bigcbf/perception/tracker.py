@@ -490,6 +490,7 @@ class Tracker:
         radii = np.asarray(radii, float).reshape(-1)
         R = self.measurement_covariance(cov, m)
         rnd = np.ones(m) if round_ is None else np.asarray(round_, float).reshape(m)
+        surf = (lambda k: np.zeros((0, 2))) if surface is None else surface.__getitem__   # measurement k's points
         self.predict(t)
         rows, cols = self.associate(z, radii, R)
         rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
@@ -499,7 +500,7 @@ class Tracker:
             _measurement_update(rows, cols, self.x, self.P, self.xs, self.Ps, np.ascontiguousarray(z),
                                 np.ascontiguousarray(R), float(pr.gate_chi2), sigma, self.sv_hit)
             for i, j in zip(rows.tolist(), cols.tolist()):
-                self.surface[i] = np.zeros((0, 2)) if surface is None else surface[j]
+                self.surface[i] = surf(j)
             # the smoothed radius and shape, the counters, and the classification (hysteresis_step), which starts
             # once the velocity rests on more than classify_after_hits measurements: a young track's velocity is the
             # difference of two or three noisy centres (module docstring); compiled (_apply_hits)
@@ -524,10 +525,10 @@ class Tracker:
                 free &= ~out
                 rejected = np.flatnonzero(out)
             if free.any():
-                surf = np.empty(m, object)
+                new = np.empty(m, object)
                 for k in range(m):
-                    surf[k] = np.zeros((0, 2)) if surface is None else surface[k]
-                self._append(z[free], radii[free], R[free], rnd[free], surf[free], t)
+                    new[k] = surf(k)
+                self._append(z[free], radii[free], R[free], rnd[free], new[free], t)
         if len(self) > pr.max_candidates:
             keep = np.argsort(self.surface_distance(robot_xy), kind="stable")[: pr.max_candidates]
             self._keep(np.sort(keep))
