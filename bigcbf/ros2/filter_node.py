@@ -24,7 +24,9 @@ timeout on the wall clock (real time only: in lock-step the simulation may pause
 than the timeout at the odometry's stamp, or when a step took longer than its budget (its own overrun; the late
 command is replaced by zero; in lock-step only with an explicit budget: the twin's time waits for the answer, and a
 late answer zeroed there made a run on a loaded machine leave the in-process episode). Until the first scan and
-the goal, the command is zero too.
+the goal, the command is zero too; in lock-step a step that finds no scan yet waits for the first one (up to
+FIRST_SCAN_WAIT_S on the wall clock, then zero): the twin publishes a scan at its first tick, and the two readers
+matching the twin's writers at different instants on a loaded machine had put that tick's /odom ahead of its /scan.
 """
 from __future__ import annotations
 
@@ -43,6 +45,8 @@ from .stack import FILTER_ONLY, SafetyStack
 BOOL, FLOAT64 = "std_msgs/msg/Bool", "std_msgs/msg/Float64"
 #: how long the first scans wait for the laser mount on /tf_static before the default mount is used [s]
 MOUNT_WAIT_S = 1.0
+#: lock-step: how long a step waits for the first scan before it answers zero ("no scan yet") [s, wall clock]
+FIRST_SCAN_WAIT_S = 5.0
 
 
 @dataclass
@@ -126,6 +130,7 @@ class FilterNode:
         self._stack_ms_pending = 0.0
         self._status = None
         self._mount_note = False
+        self._deferred: tuple | None = None    # lock-step: a step waiting for the first scan (its _step args, wall)
         node.subscribe("/tf_static", msgdefs.TF_MESSAGE, self._on_tf_static, transport.LATCHED)
         node.subscribe(opts.goal_topic, msgdefs.POSE_STAMPED, self._on_goal, transport.LATCHED)
         node.subscribe(opts.scan_topic, msgdefs.LASER_SCAN, self._on_scan, sensor)   # before /odom: order kept
@@ -183,6 +188,9 @@ class FilterNode:
             self._stack_ms_pending += self.stack.scan(scan, pose)
             self._scan_in.append(t_in)
             self.stats.scans += 1
+        if self._deferred is not None and self.stack.scan_t is not None:
+            args, self._deferred = self._deferred[0], None
+            self._step(*args)
 
     # --- a control step --------------------------------------------------------------------------------------
     def _why_zero(self, t: float) -> str | None:
@@ -194,9 +202,12 @@ class FilterNode:
             return f"stale /scan ({t - self.stack.scan_t:.2f} s at the odometry's stamp)"
         return None
 
-    def _step(self, t: float, stamp, u_in, t_in: float) -> None:
+    def _step(self, t: float, stamp, u_in, t_in: float, *, waited: bool = False) -> None:
         self._last_step_t = t
         why = self._why_zero(t)
+        if why == "no scan yet" and self.opts.lockstep and not waited:
+            self._deferred = ((t, stamp, u_in, t_in), time.perf_counter())     # answered by _flush_scans or spin
+            return
         out = None
         if why is None:
             out = self.stack.control(t, self._odom[-1][1], u_in)
@@ -271,6 +282,9 @@ class FilterNode:
         while not should_stop():
             self.node.spin_once(period_s)
             self.watchdog()
+            if self._deferred is not None and time.perf_counter() - self._deferred[1] > FIRST_SCAN_WAIT_S:
+                args, self._deferred = self._deferred[0], None
+                self._step(*args, waited=True)
             if self.opts.idle_exit_s is not None and self._odom_wall is not None \
                     and time.perf_counter() - self._odom_wall > self.opts.idle_exit_s:
                 return

@@ -102,7 +102,8 @@ class TwinNode:
                  cmd_timeout_s: float = 0.5, answer_timeout_s: float = 10.0, cmd_topic: str = "/cmd_vel"):
         self.ep, self.node, self.lockstep = episode, node, lockstep
         self.speed, self.cmd_timeout_s, self.answer_timeout_s = float(speed), cmd_timeout_s, answer_timeout_s
-        self.w = TopicWriter(node)
+        # lock-step: the filter's readers of /scan and /odom are transient local (transport.LOCKSTEP)
+        self.w = TopicWriter(node, {"/scan": transport.LOCKSTEP, "/odom": transport.LOCKSTEP} if lockstep else None)
         self._cmd: tuple[np.ndarray, float, int | None] | None = None    # (u, wall time, stamp ns or None)
         self.ignored = 0                                                   # lock-step: commands of no pending tick
         #: when a list: (t, odometry state, the scan published at this tick or None) per tick (bigcbf.ros2.perf)
@@ -169,11 +170,16 @@ class TwinNode:
 
     # --- the loop -----------------------------------------------------------------------------------------------
     def wait_for_filter(self, timeout_s: float) -> None:
-        """Lock-step: wait until a subscriber of /odom and a publisher of /cmd_vel have matched, and the latched
-        messages (mount, goal) have reached it."""
+        """Lock-step: wait until the filter's readers of /scan, /odom and /tf_static and a publisher of /cmd_vel
+        have matched, and the latched messages (mount, goal) have reached it.
+
+        Every one of the three, not /odom alone: /tf_static's acknowledgement is empty while its reader is
+        unmatched (the filter then waits for the mount). What a matched writer sends before the remote reader has
+        matched it in turn reaches the reader on that match (transport.LOCKSTEP, transient local), and a step that
+        comes before the first scan waits for it on the filter's side (filter_node.FIRST_SCAN_WAIT_S)."""
         deadline = time.monotonic() + timeout_s
-        odom = self.w.pubs["/odom"].writer
-        while len(odom.get_matched_subscriptions()) == 0 or not any(
+        needed = [self.w.pubs[topic].writer for topic in ("/scan", "/odom", "/tf_static")]
+        while any(len(w.get_matched_subscriptions()) == 0 for w in needed) or not any(
                 len(r.get_matched_publications()) for r, _, _ in self.node._readers):
             if time.monotonic() > deadline:
                 raise UserError(f"--lockstep: no filter node answered within {timeout_s:g} s on domain "

@@ -36,8 +36,11 @@ SENSOR_DATA = QosProfile("sensor_data", reliable=False, transient_local=False, d
 DEFAULT = QosProfile("default", reliable=True, transient_local=False, depth=10)
 LATCHED = QosProfile("latched", reliable=True, transient_local=True, depth=1)
 CLOCK = QosProfile("clock", reliable=False, transient_local=False, depth=1)
-#: lock-step between our own nodes: nothing may be lost (reliable), the whole exchange kept
-LOCKSTEP = QosProfile("lockstep", reliable=True, transient_local=False, depth=100)
+#: lock-step between our own nodes (the twin's /scan and /odom, the filter's readers of them): nothing may be lost
+#: (reliable), the whole exchange kept, and what was written before a reader matched the writer is delivered on the
+#: match (transient local: with volatile durability a reader that matched the twin's writers after the writers
+#: matched it lost the first scans, and the filter answered "no scan yet" for the first ticks on a loaded machine)
+LOCKSTEP = QosProfile("lockstep", reliable=True, transient_local=True, depth=100)
 
 #: the largest ROS_DOMAIN_ID (ROS 2's rule for the default port mapping)
 MAX_DOMAIN_ID = 232
@@ -132,7 +135,12 @@ class Node:
 
     def spin_once(self, timeout_s: float) -> int:
         """Wait up to ``timeout_s`` for messages, then hand every waiting one to its callback, in the order the
-        subscriptions were made. Returns how many were handled."""
+        subscriptions were made. Returns how many were handled.
+
+        The readers are taken from the last subscription to the first and handed on from the first: a message that
+        lands while the readers are taken is then either handed on with the ones written before it on an earlier
+        subscription's topic, or waits for the next call with them (one writer, in order: the twin's /scan before
+        its /odom). Taken first to last, a /scan landing after its reader was taken went after its /odom."""
         from cyclonedds.util import duration
 
         n = self._waitset.wait(duration(seconds=max(0.0, timeout_s)))
@@ -143,8 +151,9 @@ class Node:
         t_in = time.perf_counter()
         self.last_wake_cpu = time.thread_time()      # this thread's CPU time at the wake (latency in CPU time)
         handled = 0
-        for reader, cond, callback in self._readers:
-            for msg in reader.take(N=64, condition=cond):
+        taken = [reader.take(N=64, condition=cond) for reader, cond, _ in reversed(self._readers)][::-1]
+        for (_, _, callback), msgs in zip(self._readers, taken):
+            for msg in msgs:
                 if isinstance(msg, InvalidSample):     # a writer's end (unregister, dispose): no data
                     continue
                 callback(msg, t_in)
