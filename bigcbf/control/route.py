@@ -36,6 +36,15 @@ pose at each scan, the perception's obstacle estimates), never the simulator.
    a person stood and left unseen (a beam without a return clears nothing) hides the goal from the visibility test
    and would hold every method 0.1-0.3 m short of it until the time limit. No path (the goal is walled off on the
    map): the goal itself, as without the route layer. Success is still judged on the real goal (bigcbf/episode.py).
+5. Progress (off by default; ``progress_time_s`` > 0): Nav2's progress checker (``SimpleProgressChecker``: the robot
+   must move ``required_movement_radius`` within ``movement_time_allowance``) with what its recovery does next (the
+   path replanned), turned into memory on the map: when the robot has stayed within ``progress_radius_m`` of one
+   point for ``progress_time_s``, the path ahead of it (``stall_ahead_m`` of arc length, widened by r_R) costs
+   ``stall_cost`` per metre more from then on, and the path is replanned. A passage the map shows open but the
+   method cannot take (wide enough for the footprint at rest, not for the filter's clearance at speed: every method
+   stood still in such gaps of the dev worlds clutter_00006 and clutter_00015) is then left for another way round
+   when there is one; where there is none (a door that is the only way) every path pays the same and the route
+   stays. Each further stall there adds the cost again.
 
 Limitations (documented choices): the map is in odom, so odometry drift skews it slowly (Nav2's global costmap
 lives in the map frame of a SLAM or localisation node, which this stack does not have); there is no path
@@ -82,6 +91,10 @@ class RouteParams:
     unknown_cost: float = ranged(0.5, 0.0, 1000.0)  # extra cost per metre through unknown cells (allow_unknown) [-]
     replan_hz: float = ranged(2.0, 0.1, 50.0)  # path replanning rate [Hz]
     lookahead_m: float = ranged(1.5, 0.2, 20.0)  # arc length of the look-ahead point along the path [m]
+    progress_time_s: float = ranged(0.0, 0.0, 600.0)  # a stall: this long within progress_radius_m (0: off) [s]
+    progress_radius_m: float = ranged(0.5, 0.01, 10.0)  # movement that counts as progress (Nav2's 0.5 m) [m]
+    stall_ahead_m: float = ranged(1.0, 0.0, 20.0)  # arc length of the path ahead a stall makes costly [m]
+    stall_cost: float = ranged(20.0, 0.0, 1e6)  # extra cost per metre of those cells, per stall [-]
 
     def __post_init__(self):
         check_field_ranges(self)
@@ -272,9 +285,10 @@ def _astar(cost, sx, sy, gx, gy):
 
 
 def cell_costs(occupied: np.ndarray, unknown: np.ndarray, res: float, inscribed_m: float,
-               params: RouteParams) -> tuple[np.ndarray, np.ndarray]:
+               params: RouteParams, stalled: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-cell costs (>= 1 per cell length; inf: occupied) and the distance [m] of each cell to the nearest occupied
-    one (inf without any), as Nav2's inflation layer grades them (module docstring, step 2)."""
+    one (inf without any), as Nav2's inflation layer grades them (module docstring, step 2); ``stalled``: the
+    extra cost per metre of the cells where the robot stalled (step 5), added."""
     if occupied.any():
         d = distance_transform_edt(~occupied) * res
     else:
@@ -282,6 +296,8 @@ def cell_costs(occupied: np.ndarray, unknown: np.ndarray, res: float, inscribed_
     grad = params.inflation_cost * np.exp(-params.cost_scaling_per_m * np.maximum(d - inscribed_m, 0.0))
     extra = np.where(d < inscribed_m, params.lethal_cost, np.where(d <= params.inflation_radius_m, grad, 0.0))
     cost = 1.0 + extra + params.unknown_cost * unknown
+    if stalled is not None:
+        cost = cost + stalled
     cost[occupied] = np.inf
     return cost, d
 
@@ -330,6 +346,9 @@ class RouteLayer:
         self.plan_ms: list[float] = []
         self.goal_ms: list[float] = []
         self.plans = self.failed_plans = 0
+        self._stalled: np.ndarray | None = None  # step 5's extra cost per metre per cell (None: no stall yet)
+        self._anchor: tuple[np.ndarray, float] | None = None     # (position, time) progress is measured from
+        self.stalls: list[tuple[float, float, float]] = []       # (t, x, y) of each stall
 
     def scan(self, scan: LaserScan, pose, obstacles: Obstacles | None = None) -> None:
         """Integrate one scan taken with the robot at ``pose`` = (x, y, theta) in odom; returns near a moving track
@@ -369,7 +388,8 @@ class RouteLayer:
         path)."""
         t0 = time.perf_counter()
         p, g = self.params, self.grid
-        cost, self._dist = cell_costs(g.occupied(p), g.unknown(), g.res, self.r_robot_m + self.d0_m, p)
+        cost, self._dist = cell_costs(g.occupied(p), g.unknown(), g.res, self.r_robot_m + self.d0_m, p,
+                                      self._stalled)
         cells = shortest_path(cost, g.cell(start_xy), g.cell(self.goal))
         self.plans += 1
         if len(cells) == 0:
@@ -396,11 +416,53 @@ class RouteLayer:
         pos = np.array([state.px, state.py])
         if not np.isfinite(pos).all():           # a faulty state: the goal as it is (the planner's fail_safe acts)
             return goal
+        if self.params.progress_time_s > 0:
+            self._progress(t, pos)
         if self._dirty or t >= self._next_plan_t:
             self.plan(pos)
             self._next_plan_t = t + 1.0 / self.params.replan_hz
         out = goal if self.path is None else self._carrot(pos)
         self.goal_ms.append(1e3 * (time.perf_counter() - t0))
+        return out
+
+    def _progress(self, t: float, pos: np.ndarray) -> None:
+        """Step 5: a stall (no ``progress_radius_m`` of movement in ``progress_time_s``) makes the path ahead
+        costly and asks for a new path; progress is measured afresh from there."""
+        p = self.params
+        if self._anchor is None or np.linalg.norm(pos - self._anchor[0]) > p.progress_radius_m:
+            self._anchor = (pos.copy(), t)
+            return
+        if t - self._anchor[1] < p.progress_time_s:
+            return
+        self._anchor = (pos.copy(), t)
+        if self.path is None or p.stall_cost <= 0:
+            return
+        self.stalls.append((float(t), float(pos[0]), float(pos[1])))
+        if self._stalled is None:
+            self._stalled = np.zeros(self.grid.shape)
+        self._stalled += p.stall_cost * self._stall_cells(pos)
+        self._dirty = True
+
+    def _stall_cells(self, pos: np.ndarray) -> np.ndarray:
+        """(nx, ny) bool: the cells whose centre lies within r_R of the path's points from the one nearest ``pos``
+        to ``stall_ahead_m`` of arc length ahead of it."""
+        g, path = self.grid, self.path
+        i0 = int(np.argmin(np.sum((path - pos) ** 2, axis=1)))
+        ahead = path[i0:]
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(ahead, axis=0), axis=1))]
+        pts = ahead[s <= self.params.stall_ahead_m]
+        reach = max(self.r_robot_m, 0.5 * g.res)
+        out = np.zeros(g.shape, bool)
+        origin = np.array([g.x0, g.y0])
+        lo = np.clip(np.floor((pts.min(axis=0) - reach - origin) / g.res).astype(int), 0, [g.nx, g.ny])
+        hi = np.clip(np.floor((pts.max(axis=0) + reach - origin) / g.res).astype(int) + 1, 0, [g.nx, g.ny])
+        if (hi <= lo).any():
+            return out
+        cx = g.x0 + (np.arange(lo[0], hi[0]) + 0.5) * g.res
+        cy = g.y0 + (np.arange(lo[1], hi[1]) + 0.5) * g.res
+        d2 = ((cx[:, None, None] - pts[None, None, :, 0]) ** 2
+              + (cy[None, :, None] - pts[None, None, :, 1]) ** 2).min(axis=2)
+        out[lo[0]:hi[0], lo[1]:hi[1]] = d2 <= reach * reach
         return out
 
     def _carrot(self, pos: np.ndarray) -> np.ndarray:

@@ -288,3 +288,79 @@ def test_perf_figures_of_the_route_layer():
                 "route_scan_median_ms", "route_tick_mean_ms"):
         assert 0 < out[key] < 1e3, key
     assert out["route_plan_median_ms"] > out["route_scan_median_ms"]     # a replan (inflation + A*) costs more
+
+
+def _wall_with_openings(rl: RouteLayer, openings) -> None:
+    """The whole grid seen and free but for a wall x in [2.0, 2.2) with ``openings`` ((y_lo, y_hi), ...)."""
+    g, p = rl.grid, rl.params
+    g.seen[:] = True
+    g.logodds[:] = p.l_min
+    x = g.x0 + (np.arange(g.nx) + 0.5) * g.res
+    y = g.y0 + (np.arange(g.ny) + 0.5) * g.res
+    wall = ((x >= 2.0) & (x < 2.2))[:, None] & np.ones(g.ny, bool)[None, :]
+    for lo, hi in openings:
+        wall &= ~((y >= lo) & (y <= hi))[None, :]
+    g.logodds[wall] = p.l_max
+
+
+def _crossing_y(path) -> float:
+    """Where a path crosses x = 2.1."""
+    i = int(np.argmin(np.abs(path[:, 0] - 2.1)))
+    return float(path[i, 1])
+
+
+def test_a_stall_sends_the_route_another_way_where_there_is_one():
+    """Step 5 (Nav2's progress checker): a robot that stays within progress_radius_m for progress_time_s makes the
+    path ahead costly; with a second opening the new path takes it, with the gap the only way the path stays."""
+    still = RobotState(1.5, 0.0, 0.0)
+    for openings, far_way in ((((-0.25, 0.25), (2.0, 3.0)), True), (((-0.25, 0.25),), False)):
+        for progress in (0.0, 5.0):
+            rl = layer(progress_time_s=progress)
+            _wall_with_openings(rl, openings)
+            rl.local_goal(0.0, still, (4.0, 0.0))
+            assert abs(_crossing_y(rl.path)) < 0.3                 # first through the near gap
+            for k in range(1, 121):                                # 6 s without moving
+                rl.local_goal(0.05 * k, still, (4.0, 0.0))
+            if progress == 0.0:
+                assert not rl.stalls and abs(_crossing_y(rl.path)) < 0.3
+                continue
+            assert [round(t, 2) for t, _, _ in rl.stalls] == [5.0]
+            if far_way:
+                assert 2.0 <= _crossing_y(rl.path) <= 3.0          # round by the other opening
+            else:
+                assert abs(_crossing_y(rl.path)) < 0.3             # no other way: the same gap
+
+
+def test_moving_counts_as_progress():
+    rl = layer(progress_time_s=2.0)
+    _wall_with_openings(rl, ((-0.25, 0.25), (2.0, 3.0)))
+    for k in range(200):                                           # 10 s at 0.06 m/s: 0.12 m in 2 s
+        rl.local_goal(0.05 * k, RobotState(0.003 * k, 0.0, 0.0), (4.0, 0.0))
+    assert [round(t, 2) for t, _, _ in rl.stalls] == [2.0, 4.0, 6.0, 8.0]     # a stall every 2 s...
+    rl = layer(progress_time_s=2.0)
+    _wall_with_openings(rl, ((-0.25, 0.25), (2.0, 3.0)))
+    for k in range(200):                                           # ...0.3 m/s moves 0.5 m in 1.7 s: none
+        rl.local_goal(0.05 * k, RobotState(-3.0 + 0.015 * k, 0.0, 0.0), (4.0, 0.0))
+    assert rl.stalls == []
+
+
+@pytest.mark.slow
+def test_the_progress_check_takes_backup_cbf_round_a_gap_it_cannot_use(tmp_path):
+    """Dev world clutter_00015 (two posts 0.71 m apart on the route's first path, wide enough for the footprint at
+    rest, not for the common filter's clearance at speed), Backup-CBF, route on, episode seed 0: standing in that gap
+    until its time runs out without the progress check; with it (3 s) the stall makes that way costly and the new
+    path goes round, to the goal (measured in the dev bench of this change, 2026-11-28)."""
+    from bigcbf.worlds.generator import generate
+    f = tmp_path / "clutter_00015.toml"
+    f.write_text(generate("clutter", 15).toml)
+    sc = load_scenario(str(f), 0)
+    out = {}
+    for progress in (0.0, 3.0):
+        cfg = RunConfig()
+        cfg = cfg.replace(route=RouteParams(enabled=True, progress_time_s=progress))
+        ep = Episode.from_config(sc, "backup-cbf", 0, cfg)
+        out[progress] = (ep.run(), ep.route.stalls)
+    (off, no_stalls), (on, stalls) = out[0.0], out[3.0]
+    assert off.timeout and not off.success and no_stalls == []
+    assert on.success and not on.collision and len(stalls) >= 1
+    assert stalls[0][0] < 15.0                                     # the first stall in the gap, early
