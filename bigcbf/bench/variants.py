@@ -63,13 +63,18 @@ def _route(config, value: str):
 #: the value ``route_progress=on`` gives ``[route] progress_time_s`` (bigcbf/control/route.py, step 5): chosen on the
 #: dev split (route on, big-cbf-plus, Backup-CBF, CBF-only, 720 episodes): 5 s gained 1 world, 3 s gained 4, none
 #: lost either way. Nav2's own default, 10 s, is more than the generated worlds' time limits leave beyond the path at
-#: 0.5 m/s (8 s), and the way round has to fit in that too.
+#: 0.5 m/s (8 s), and the way round has to fit in that too. Measured in docs/fidelity.md ("The route layer's
+#: progress check").
 ROUTE_PROGRESS_ON_S = 3.0
+#: and ``[route] wait_range_m``: no stall while a moving track is this near (a wait for people is not a stall)
+ROUTE_PROGRESS_WAIT_M = 2.0
 
 
 def _route_progress(config, value: str):
+    on = value == "on"
     return config.replace(route=dataclasses.replace(
-        config.route, progress_time_s=ROUTE_PROGRESS_ON_S if value == "on" else 0.0))
+        config.route, progress_time_s=ROUTE_PROGRESS_ON_S if on else 0.0,
+        wait_range_m=ROUTE_PROGRESS_WAIT_M if on else 0.0))
 
 
 def _last_resorts() -> tuple[str, ...]:

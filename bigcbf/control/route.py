@@ -44,7 +44,9 @@ pose at each scan, the perception's obstacle estimates), never the simulator.
    method cannot take (wide enough for the footprint at rest, not for the filter's clearance at speed: every method
    stood still in such gaps of the dev worlds clutter_00006 and clutter_00015) is then left for another way round
    when there is one; where there is none (a door that is the only way) every path pays the same and the route
-   stays. Each further stall there adds the cost again.
+   stays. Each further stall there adds the cost again. With ``wait_range_m`` > 0 the robot is waiting, not
+   stalled, while a track the perception reports as moving (ids >= 0, not static) is within that distance at the
+   latest scan: the time allowance starts again from there.
 
 Limitations (documented choices): the map is in odom, so odometry drift skews it slowly (Nav2's global costmap
 lives in the map frame of a SLAM or localisation node, which this stack does not have); there is no path
@@ -95,6 +97,7 @@ class RouteParams:
     progress_radius_m: float = ranged(0.5, 0.01, 10.0)  # movement that counts as progress (Nav2's 0.5 m) [m]
     stall_ahead_m: float = ranged(1.0, 0.0, 20.0)  # arc length of the path ahead a stall makes costly [m]
     stall_cost: float = ranged(20.0, 0.0, 1e6)  # extra cost per metre of those cells, per stall [-]
+    wait_range_m: float = ranged(0.0, 0.0, 100.0)  # no stall while a moving track is this near (0: none) [m]
 
     def __post_init__(self):
         check_field_ranges(self)
@@ -307,6 +310,18 @@ def shortest_path(cost: np.ndarray, start: tuple[int, int], goal: tuple[int, int
     return _astar(np.ascontiguousarray(cost, float), int(start[0]), int(start[1]), int(goal[0]), int(goal[1]))
 
 
+def _mover_within(obstacles: Obstacles | None, x: float, y: float, reach_m: float) -> bool:
+    """Whether a track the perception reports as moving (ids >= 0, not static) has its edge within ``reach_m`` of
+    (x, y)."""
+    if obstacles is None or not len(obstacles):
+        return False
+    moving = (np.asarray(obstacles.ids) >= 0) & ~np.asarray(obstacles.static, bool)
+    if not moving.any():
+        return False
+    p, r = np.asarray(obstacles.p, float)[moving], np.asarray(obstacles.r, float)[moving]
+    return bool((np.hypot(p[:, 0] - x, p[:, 1] - y) - r <= reach_m).any())
+
+
 # --- the layer -----------------------------------------------------------------------------------------------------
 
 class RouteLayer:
@@ -349,6 +364,7 @@ class RouteLayer:
         self._stalled: np.ndarray | None = None  # step 5's extra cost per metre per cell (None: no stall yet)
         self._anchor: tuple[np.ndarray, float] | None = None     # (position, time) progress is measured from
         self.stalls: list[tuple[float, float, float]] = []       # (t, x, y) of each stall
+        self._waiting = False                    # a moving track within wait_range_m at the latest scan (step 5)
 
     def scan(self, scan: LaserScan, pose, obstacles: Obstacles | None = None) -> None:
         """Integrate one scan taken with the robot at ``pose`` = (x, y, theta) in odom; returns near a moving track
@@ -375,6 +391,8 @@ class RouteLayer:
                 d = np.linalg.norm(pts[:, None, :] - obstacles.p[moving][None], axis=2)
                 near = (d <= obstacles.r[moving][None] + p.dynamic_margin_m).any(axis=1)
                 hit[b[near]] = False
+        if p.wait_range_m > 0:
+            self._waiting = _mover_within(obstacles, x, y, p.wait_range_m)
         clear_len = np.where(valid, np.minimum(r - 0.5 * g.res, p.clear_range_m), 0.0)
         g.integrate(sensor, ang, np.where(valid, r, 0.0), hit, clear_len, p)
         if self._path_cells is not None and len(self._path_cells):   # a return on the path ahead: replan now
@@ -429,7 +447,8 @@ class RouteLayer:
         """Step 5: a stall (no ``progress_radius_m`` of movement in ``progress_time_s``) makes the path ahead
         costly and asks for a new path; progress is measured afresh from there."""
         p = self.params
-        if self._anchor is None or np.linalg.norm(pos - self._anchor[0]) > p.progress_radius_m:
+        if (self._anchor is None or self._waiting
+                or np.linalg.norm(pos - self._anchor[0]) > p.progress_radius_m):
             self._anchor = (pos.copy(), t)
             return
         if t - self._anchor[1] < p.progress_time_s:

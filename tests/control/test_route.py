@@ -364,3 +364,23 @@ def test_the_progress_check_takes_backup_cbf_round_a_gap_it_cannot_use(tmp_path)
     assert off.timeout and not off.success and no_stalls == []
     assert on.success and not on.collision and len(stalls) >= 1
     assert stalls[0][0] < 15.0                                     # the first stall in the gap, early
+
+
+def test_no_stall_while_a_moving_track_is_near():
+    """wait_range_m: a robot standing still while a moving track is within that distance waits (people coming
+    through the gap), it has not stalled; a static track that near, or a moving one farther, does not count."""
+    blank = LaserScan(0.0, -math.pi, 2 * math.pi / N_BEAMS, 0.15, 12.0, np.full(N_BEAMS, np.inf, np.float32))
+    still = RobotState(1.5, 0.0, 0.0)
+    cases = (([[2.9, 0.0]], False, 2.0, []),                        # edge 1.15 m away, moving: waiting
+             ([[2.9, 0.0]], True, 2.0, [3.0]),                      # the same track reported static: a stall
+             ([[4.0, 0.0]], False, 2.0, [3.0]),                     # moving but 2.25 m away: a stall
+             ([[2.9, 0.0]], False, 0.0, [3.0]))                     # wait_range_m 0: the rule off
+    for p, static, wait, stalls in cases:
+        rl = layer(progress_time_s=3.0, wait_range_m=wait)
+        _wall_with_openings(rl, ((-0.25, 0.25), (2.0, 3.0)))
+        track = Obstacles.from_lists(p, v=[[-0.5, 0.0]], r=0.25, static=static, ids=[4])
+        for k in range(80):                                        # 4 s standing, a scan every 0.1 s
+            if k % 2 == 0:
+                rl.scan(blank, (still.px, still.py, still.theta), track)
+            rl.local_goal(0.05 * k, still, (4.0, 0.0))
+        assert [round(t, 2) for t, _, _ in rl.stalls] == stalls, (p, static, wait)
