@@ -54,7 +54,6 @@ class Robot:
     def drain(self, node, seconds):
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            node.spin(lambda: True)                        # one watchdog check
             node.node.spin_once(0.01)
             node.watchdog()
             self.n.spin_once(0.01)
