@@ -310,16 +310,12 @@ def shortest_path(cost: np.ndarray, start: tuple[int, int], goal: tuple[int, int
     return _astar(np.ascontiguousarray(cost, float), int(start[0]), int(start[1]), int(goal[0]), int(goal[1]))
 
 
-def _mover_within(obstacles: Obstacles | None, x: float, y: float, reach_m: float) -> bool:
-    """Whether a track the perception reports as moving (ids >= 0, not static) has its edge within ``reach_m`` of
-    (x, y)."""
+def _movers(obstacles: Obstacles | None) -> tuple[np.ndarray, np.ndarray]:
+    """The centres (K, 2) and radii (K,) of the tracks the perception reports as moving (ids >= 0, not static)."""
     if obstacles is None or not len(obstacles):
-        return False
+        return np.zeros((0, 2)), np.zeros(0)
     moving = (np.asarray(obstacles.ids) >= 0) & ~np.asarray(obstacles.static, bool)
-    if not moving.any():
-        return False
-    p, r = np.asarray(obstacles.p, float)[moving], np.asarray(obstacles.r, float)[moving]
-    return bool((np.hypot(p[:, 0] - x, p[:, 1] - y) - r <= reach_m).any())
+    return np.asarray(obstacles.p, float)[moving], np.asarray(obstacles.r, float)[moving]
 
 
 # --- the layer -----------------------------------------------------------------------------------------------------
@@ -383,16 +379,15 @@ class RouteLayer:
         ang = th + lyaw + scan.angle_min + scan.angle_increment * np.arange(len(r))
         valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
         hit = valid & (r <= p.mark_range_m)
-        if obstacles is not None and len(obstacles):
-            moving = (np.asarray(obstacles.ids) >= 0) & ~np.asarray(obstacles.static, bool)
-            if moving.any() and hit.any():
-                b = np.flatnonzero(hit)
-                pts = sensor + r[b, None] * np.c_[np.cos(ang[b]), np.sin(ang[b])]
-                d = np.linalg.norm(pts[:, None, :] - obstacles.p[moving][None], axis=2)
-                near = (d <= obstacles.r[moving][None] + p.dynamic_margin_m).any(axis=1)
-                hit[b[near]] = False
-        if p.wait_range_m > 0:
-            self._waiting = _mover_within(obstacles, x, y, p.wait_range_m)
+        mp, mr = _movers(obstacles)
+        if len(mr) and hit.any():
+            b = np.flatnonzero(hit)
+            pts = sensor + r[b, None] * np.c_[np.cos(ang[b]), np.sin(ang[b])]
+            d = np.linalg.norm(pts[:, None, :] - mp[None], axis=2)
+            near = (d <= mr[None] + p.dynamic_margin_m).any(axis=1)
+            hit[b[near]] = False
+        if p.wait_range_m > 0:                   # step 5: waiting for a mover whose edge is this near
+            self._waiting = bool((np.hypot(mp[:, 0] - x, mp[:, 1] - y) - mr <= p.wait_range_m).any())
         clear_len = np.where(valid, np.minimum(r - 0.5 * g.res, p.clear_range_m), 0.0)
         g.integrate(sensor, ang, np.where(valid, r, 0.0), hit, clear_len, p)
         if self._path_cells is not None and len(self._path_cells):   # a return on the path ahead: replan now
@@ -465,10 +460,8 @@ class RouteLayer:
     def _stall_cells(self, pos: np.ndarray) -> np.ndarray:
         """(nx, ny) bool: the cells whose centre lies within r_R of the path's points from the one nearest ``pos``
         to ``stall_ahead_m`` of arc length ahead of it."""
-        g, path = self.grid, self.path
-        i0 = int(np.argmin(np.sum((path - pos) ** 2, axis=1)))
-        ahead = path[i0:]
-        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(ahead, axis=0), axis=1))]
+        g = self.grid
+        _, ahead, s = self._ahead(pos)
         pts = ahead[s <= self.params.stall_ahead_m]
         reach = max(self.r_robot_m, 0.5 * g.res)
         out = np.zeros(g.shape, bool)
@@ -484,11 +477,18 @@ class RouteLayer:
         out[lo[0]:hi[0], lo[1]:hi[1]] = d2 <= reach * reach
         return out
 
-    def _carrot(self, pos: np.ndarray) -> np.ndarray:
+    def _ahead(self, pos: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """The index of the path point nearest ``pos``, the path from it on, and the arc length along it from that
+        point to each of its points."""
         path = self.path
         i0 = int(np.argmin(np.sum((path - pos) ** 2, axis=1)))
         ahead = path[i0:]
-        s = np.linalg.norm(ahead[0] - pos) + np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(ahead, axis=0), axis=1))]
+        return i0, ahead, np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(ahead, axis=0), axis=1))]
+
+    def _carrot(self, pos: np.ndarray) -> np.ndarray:
+        path = self.path
+        i0, ahead, s = self._ahead(pos)
+        s = np.linalg.norm(ahead[0] - pos) + s
         within = np.flatnonzero(s <= self.params.lookahead_m)
         pick = min(1, len(ahead) - 1)
         for j in within[::-1]:

@@ -189,8 +189,7 @@ class FilterNode:
             self._scan_in.append(t_in)
             self.stats.scans += 1
         if self._deferred is not None and self.stack.scan_t is not None:
-            args, self._deferred = self._deferred[0], None
-            self._step(*args)
+            self._answer_deferred()
 
     # --- a control step --------------------------------------------------------------------------------------
     def _why_zero(self, t: float) -> str | None:
@@ -223,6 +222,11 @@ class FilterNode:
                 self.stats.stack_ms.append(self._stack_ms_pending + out.compute_ms)
         self._scan_in, self._stack_ms_pending = [], 0.0
         self._after_step(t, out, why)
+
+    def _answer_deferred(self, waited: bool = False) -> None:
+        """The lock-step step that waited for the first scan: with it, or (``waited``) zero after the wait."""
+        args, self._deferred = self._deferred[0], None
+        self._step(*args, waited=waited)
 
     def _publish_cmd(self, u, stamp) -> None:
         tw = convert.twist_msg(u)
@@ -283,8 +287,7 @@ class FilterNode:
             self.node.spin_once(period_s)
             self.watchdog()
             if self._deferred is not None and time.perf_counter() - self._deferred[1] > FIRST_SCAN_WAIT_S:
-                args, self._deferred = self._deferred[0], None
-                self._step(*args, waited=True)
+                self._answer_deferred(waited=True)
             if self.opts.idle_exit_s is not None and self._odom_wall is not None \
                     and time.perf_counter() - self._odom_wall > self.opts.idle_exit_s:
                 return
