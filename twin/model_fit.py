@@ -322,6 +322,23 @@ def simulate_bins(pb: Problem, params) -> np.ndarray:
     return sim
 
 
+def ensemble_bins(pb: Problem, params, angles: np.ndarray) -> np.ndarray:
+    """:func:`simulate_bins` once per row of ``angles`` (the wheels turned by that much at the start,
+    ``bigcbf.sim.sysid.wheel_phase_states``): (members, bins, channels). The simulated Mecanum contact is chaotic in
+    yaw (module docstring of ``reproducible_columns``): one rollout is one draw of where each roller meets the floor,
+    and the members' mean is the model's expected response, which a parameter must move to be identifiable
+    (``scripts/twin_identifiability.py``)."""
+    own = pb.initial_state
+    try:
+        out = []
+        for state in _sim().wheel_phase_states(pb.spec, own, robots_wheels(pb.robot), angles):
+            pb.initial_state = state
+            out.append(simulate_bins(pb, params))
+        return np.array(out)
+    finally:
+        pb.initial_state = own
+
+
 def robots_wheels(name: str) -> tuple[str, ...]:
     from bigcbf import robots
     return robots.robot(name).wheels
@@ -654,6 +671,17 @@ def fit_log(raw, robot_name: str = "rosmaster_x3", opt: ModelFitOptions = ModelF
             t_split: float | None = None) -> ModelFit:
     """``bigcbf calibrate LOG --model``: calibrate the command layer on the log (up to log time ``t_split``) as
     ``bigcbf replay`` maps it onto the model (twin.replay.command_profile), then fit the model behind it."""
+    data, front, imu, more = log_front(raw, robot_name, cal_opt, t_split)
+    if t_split is not None:
+        opt = replace(opt, t_end_s=t_split - float(data.cmd.t[0]))
+    fit = fit_model(data, front, robot_name, opt, imu=imu)
+    fit.notes += [n for n in more if "nominal replay" in n]
+    return fit
+
+
+def log_front(raw, robot_name: str = "rosmaster_x3", cal_opt=None, t_split: float | None = None):
+    """What :func:`fit_log` fits behind: (the log on its analysis time base, the calibrated command layer in front
+    of the model (:func:`front_of`), the log's IMU yaw rate or None, the command layer's notes)."""
     from .calibrate import CalibrationOptions
     from .replay import _checked, _log_model, command_profile, run_profile, scene_for
     cal_opt = cal_opt or CalibrationOptions()
@@ -665,12 +693,7 @@ def fit_log(raw, robot_name: str = "rosmaster_x3", opt: ModelFitOptions = ModelF
         raise UserError("the model fit needs the command layer in front of it, and the log could not be calibrated: "
                         + "; ".join(n for n in notes if n.startswith("no calibrated replay")), file=str(raw.path))
     prof, _, more = command_profile(data, cal, None, delay_s, nominal, scene, timing.period_s, 5.0, cal_opt, t_split)
-    t0 = float(data.cmd.t[0])
-    if t_split is not None:
-        opt = replace(opt, t_end_s=t_split - t0)
-    fit = fit_model(data, front_of(prof), robot_name, opt, imu=_imu(raw, t0))
-    fit.notes += [n for n in more if "nominal replay" in n]
-    return fit
+    return data, front_of(prof), _imu(raw, float(data.cmd.t[0])), more
 
 
 def model_run(raw, data, prof: RobotProfile, opt, period_s, t_split, robot_dir=None):

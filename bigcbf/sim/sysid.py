@@ -112,6 +112,23 @@ def rollout_inputs(model, actuators, times: np.ndarray, ctrl: np.ndarray):
     return control, sysid.create_initial_state(model, d.qpos.copy(), d.qvel.copy())
 
 
+def wheel_phase_states(spec, initial_state, wheels, angles: np.ndarray) -> list:
+    """Copies of sysid's ``initial_state`` of the model of ``spec`` with the wheel joints ``wheels`` turned by
+    ``angles`` (rows of len(wheels) angles [rad], added to the state's own): the same robot at the same pose and
+    speed, each wheel's rollers meeting the floor at another point of their sweep."""
+    from mujoco import sysid
+    model = spec.compile()
+    d = mujoco.MjData(model)
+    mujoco.mj_setState(model, d, np.asarray(initial_state, float), mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    adr = [model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, w)] for w in wheels]
+    out = []
+    for row in np.atleast_2d(np.asarray(angles, float)):
+        q = d.qpos.copy()
+        q[adr] += row
+        out.append(sysid.create_initial_state(model, q, d.qvel.copy()))
+    return out
+
+
 def rollout_wheels_gyro(spec, params, control, initial_state, wheels):
     """Roll the model of ``spec`` with ``params``' modifiers applied out (``mujoco.sysid.sysid_rollout``) from
     ``initial_state`` under ``control``: (sensor times, the wheel joints' speeds (n, len(wheels)) from their
