@@ -33,15 +33,19 @@ from twin.record import record_calibration
 ROBOT = "rosmaster_x3"
 
 
-def draw_model(rng: np.random.Generator) -> tuple[dict, RobotProfile]:
-    """A hidden model (parameter values) and its command layer (module docstring)."""
+def draw_model(rng: np.random.Generator, firmware_cap: bool = False) -> tuple[dict, RobotProfile]:
+    """A hidden model (parameter values) and its command layer (module docstring; ``firmware_cap``: the command
+    layer also clamps the wheels' rim speed at U(0.35, 0.6) m/s, below the drive's 0.8 m/s)."""
     values = {"wheel_kv": 3.0 * 2 ** rng.uniform(-1, 1), "wheel_damping": rng.uniform(0.0, 0.15),
               "floor_friction": rng.uniform(0.4, 1.5), "base_mass": 3.6 * rng.uniform(0.7, 1.5)}
-    return values, RobotProfile(latency_s=float(rng.uniform(0.0, 0.15)))
+    latency = float(rng.uniform(0.0, 0.15))
+    cap = float(rng.uniform(0.35, 0.6)) if firmware_cap else None
+    return values, RobotProfile(latency_s=latency, wheel_speed_max_mps=cap)
 
 
-def one_case(i: int, rng, seed: int, duration: float, tmp: Path, opt: ModelFitOptions) -> dict:
-    values, front = draw_model(rng)
+def one_case(i: int, rng, seed: int, duration: float, tmp: Path, opt: ModelFitOptions,
+             firmware_cap: bool = False) -> dict:
+    values, front = draw_model(rng, firmware_cap)
     hidden = tmp / f"hidden{i}"
     write_robot_folder(model_with(ROBOT, values, front), hidden)
     log = tmp / f"h{i}.mcap"
@@ -49,6 +53,9 @@ def one_case(i: int, rng, seed: int, duration: float, tmp: Path, opt: ModelFitOp
     t0 = time.process_time()
     fit = fit_log(read_log(log, use_scan=False), ROBOT, opt)
     row = {"case": i, "latency_true_s": front.latency_s, "latency_front_s": fit.front.latency_s,
+           "cap_true_mps": front.wheel_speed_max_mps, "cap_front_mps": fit.front.wheel_speed_max_mps,
+           "cap_note": next((n for n in fit.notes if "wheel-speed cap" in n), None),
+           "cost": fit.cost, "rms_fit": [float(v) for v in fit.rms_fit],
            "cpu_s": time.process_time() - t0, "fit_cpu_s": fit.cpu_s, "log_s": fit.log_s,
            "cpu_s_per_log_minute": fit.cpu_per_log_minute, "level": fit.level, "params": {}}
     for k, n in enumerate(fit.names):
@@ -62,21 +69,23 @@ def one_case(i: int, rng, seed: int, duration: float, tmp: Path, opt: ModelFitOp
 
 
 def run(n: int, seed: int, duration: float, opt: ModelFitOptions = ModelFitOptions(),
-        json_path: Path | None = None) -> list[dict]:
+        json_path: Path | None = None, firmware_cap: bool = False) -> list[dict]:
     """The n cases (a row each, printed as it comes; with ``json_path`` the rows so far and their summary are
     written after each case, so a run cut short still leaves its numbers)."""
     rng = np.random.default_rng(seed)
     rows = []
     with tempfile.TemporaryDirectory(prefix="bigcbf-model-recovery-") as tmp:
         for i in range(n):
-            row = one_case(i, rng, seed, duration, Path(tmp), opt)
+            row = one_case(i, rng, seed, duration, Path(tmp), opt, firmware_cap)
             rows.append(row)
             cells = []
             for name, p in row["params"].items():
                 cells.append(f"{name} {p['truth']:.3g}->" + (f"{p['estimate']:.3g} ({p['rel_err']:+.0%}, "
                                                               f"{'in' if p['covered'] else 'OUT'})"
                                                               if p["identified"] else "n.i."))
-            print(f"{i:3d} latency {row['latency_true_s']:.3f}->{row['latency_front_s']:.3f} s  " + "  ".join(cells)
+            cap = (f"cap {row['cap_true_mps'] or 0:.2f}->{row['cap_front_mps'] or 0:.2f}  "
+                   if row["cap_true_mps"] or row["cap_front_mps"] or row["cap_note"] else "")
+            print(f"{i:3d} latency {row['latency_true_s']:.3f}->{row['latency_front_s']:.3f} s  {cap}" + "  ".join(cells)
                   + f"  {row['cpu_s_per_log_minute']:.0f} s CPU/log-min", flush=True)
             if json_path is not None:
                 json_path.write_text(json.dumps({"rows": rows, "summary": summary(rows)}, indent=1))
@@ -113,9 +122,11 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=20)
     ap.add_argument("--seed", type=int, default=2700)
     ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--firmware-cap", action="store_true",
+                    help="the hidden command layer also clamps the wheels' rim speed (draw_model)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
-    rows = run(args.n, args.seed, args.duration, json_path=args.json)
+    rows = run(args.n, args.seed, args.duration, json_path=args.json, firmware_cap=args.firmware_cap)
     for k, v in summary(rows).items():
         print(f"{k:16s} {v}")
 

@@ -33,6 +33,10 @@ bootstrap half-width is at most ``max_rel_width`` of the value, and the estimate
 log does not identify is reported as such, frozen at the model's own value and the others refitted without it; it
 is never guessed.
 
+The wheel-speed cap: the command layer calibrated on the log reads a cap on the wheels' rim speed as a firmware
+limit, but a damped wheel at its servo's torque limit is capped by the model's own physics. :func:`fit_behind` fits
+the model behind the command layer with and without the cap and keeps the smaller residual (docs/twin.md).
+
 Every MuJoCo call of the fit (the MjSpec and its parameters' modifiers, the rollout, the optimizer, the iid
 intervals, the check of a written robot folder) is in ``bigcbf.sim.sysid`` (the sim layer: "MuJoCo only in sim");
 this module works on numpy arrays, plain values and that module's opaque handles, and imports no MuJoCo itself.
@@ -110,6 +114,7 @@ class ModelFit:
     cpu_s: float                    # CPU time of the fit (rollouts, optimisation, bootstrap)
     evaluations: int
     notes: list[str] = field(default_factory=list)
+    cost: float = math.nan          # the final residual's mean square, over the channel scales
 
     @property
     def cpu_per_log_minute(self) -> float:
@@ -129,7 +134,7 @@ class ModelFit:
                                "identified": bool(self.identified[i]), "why": self.reasons[i]}
                            for i, n in enumerate(self.names)},
             "residual_rms": {"channels": self.channels, "nominal": self.rms_nominal.tolist(),
-                             "fitted": self.rms_fit.tolist()},
+                             "fitted": self.rms_fit.tolist()}, "cost": self.cost,
             "front": {"latency_s": self.front.latency_s, "bias": list(self.front.bias),
                       "wheel_speed_max_mps": self.front.wheel_speed_max_mps,
                       "wheel_accel_max_mps2": self.front.wheel_accel_max_mps2,
@@ -513,7 +518,7 @@ def fit_model(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
     iid = np.array([rel_halfwidth(n, x[i], iid[i]) for i, n in enumerate(names)])
     return ModelFit(robot_name, names, ph(nominal), ph(x), ph(lo), ph(hi), iid, ok, why,
                     opt.level, pb.channels, rms(r0), rms(r_fin), front, float(pb.edges[-1]),
-                    time.process_time() - c0, pb.evaluations, notes)
+                    time.process_time() - c0, pb.evaluations, notes, float(np.mean(r_fin ** 2)))
 
 
 def _refit(pb: Problem, robot_name: str, x: np.ndarray, ok: np.ndarray, why: list[str], opt: ModelFitOptions):
@@ -667,6 +672,33 @@ def _imu(raw, t0: float):
         return None
 
 
+def fit_behind(data, front: RobotProfile, robot_name: str = "rosmaster_x3",
+               opt: ModelFitOptions = ModelFitOptions(), imu=None) -> ModelFit:
+    """:func:`fit_model` behind the command layer ``front``, with the wheel-speed cap explained by whichever of the
+    two the log prefers. A cap the command layer reads from the log (``wheel_speed_max_mps``) may be the firmware's
+    clamp or the model's own physics: the wheel servos' torque limit against the wheel damping holds a wheel below
+    torque limit / damping (``scripts/twin_identifiability.py``; docs/twin.md). With a cap in front, the model is
+    fitted twice, behind the command layer as read and behind it without the cap, and the fit whose residual is
+    smaller is kept (the one without the cap on a tie: the physics alone explains it), with a note saying which and
+    both residuals; the CPU time counts both fits."""
+    fit = fit_model(data, front, robot_name, opt, imu=imu)
+    if front.wheel_speed_max_mps is None:
+        return fit
+    bare = fit_model(data, replace(front, wheel_speed_max_mps=None), robot_name, opt, imu=imu)
+    cpu, evals = fit.cpu_s + bare.cpu_s, fit.evaluations + bare.evaluations
+    cap = f"{front.wheel_speed_max_mps:.3g} m/s"
+    if bare.cost <= fit.cost:
+        keep, why = bare, (f"the wheel-speed cap the command layer read ({cap}) is left to the model (its wheels' "
+                           f"torque limit and damping): fitted without it the residual is {bare.cost:.4g}, with it "
+                           f"{fit.cost:.4g}")
+    else:
+        keep, why = fit, (f"the command layer's wheel-speed cap ({cap}) kept in front of the model: fitted without "
+                          f"it the residual is {bare.cost:.4g}, with it {fit.cost:.4g}")
+    keep.cpu_s, keep.evaluations = cpu, evals
+    keep.notes.append(why)
+    return keep
+
+
 def fit_log(raw, robot_name: str = "rosmaster_x3", opt: ModelFitOptions = ModelFitOptions(), cal_opt=None,
             t_split: float | None = None) -> ModelFit:
     """``bigcbf calibrate LOG --model``: calibrate the command layer on the log (up to log time ``t_split``) as
@@ -674,7 +706,7 @@ def fit_log(raw, robot_name: str = "rosmaster_x3", opt: ModelFitOptions = ModelF
     data, front, imu, more = log_front(raw, robot_name, cal_opt, t_split)
     if t_split is not None:
         opt = replace(opt, t_end_s=t_split - float(data.cmd.t[0]))
-    fit = fit_model(data, front, robot_name, opt, imu=imu)
+    fit = fit_behind(data, front, robot_name, opt, imu=imu)
     fit.notes += [n for n in more if "nominal replay" in n]
     return fit
 
@@ -717,7 +749,7 @@ def model_run(raw, data, prof: RobotProfile, opt, period_s, t_split, robot_dir=N
                               "this log's calibrated command layer (the folder has no profiles/<name>.toml)")]
     t0 = float(data.cmd.t[0])
     mopt = ModelFitOptions(t_end_s=None if t_split is None else t_split - t0)
-    fit = fit_model(data, front_of(prof), "rosmaster_x3", mopt, imu=_imu(raw, t0))
+    fit = fit_behind(data, front_of(prof), "rosmaster_x3", mopt, imu=_imu(raw, t0))
     with tempfile.TemporaryDirectory(prefix="bigcbf-model-") as tmp:
         d = Path(tmp) / "fitted_model"
         write_robot_folder(fit, d)

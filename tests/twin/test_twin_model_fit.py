@@ -3,6 +3,7 @@ intervals, and the CLI's --model / --robot options."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -229,3 +230,28 @@ def test_identifiability_script_resolves_damping_not_gain(tmp_path):
     assert not res["params"]["wheel_kv"]["resolved"]
     d = res["params"]["wheel_damping"]
     assert d["effect"][0] >= 2 * res["null"][0] and d["z"][0] >= 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hidden, cap, kept", [
+    ({"wheel_damping": 0.15}, None, False),        # the wheels' torque limit against their damping caps them
+    ({"wheel_damping": 0.002}, 0.35, True),        # the firmware clamps them
+])
+def test_the_log_chooses_what_caps_the_wheels(tmp_path, hidden, cap, kept):
+    """twin.model_fit.fit_behind with a wheel-speed cap in the command layer: the model is fitted with and without
+    it and the smaller residual is kept, with a note giving both. A cap that is the model's own physics (a damped
+    wheel at its torque limit) is left to the model; a firmware's clamp on an undamped robot stays in front."""
+    front = RobotProfile(latency_s=0.03, wheel_speed_max_mps=cap)
+    d = tmp_path / "hidden"
+    mf.write_robot_folder(mf.model_with("rosmaster_x3", hidden, front), d)
+    log = tmp_path / "h.mcap"
+    record_calibration(front, log, seed=5, duration_s=10.0, robot=str(d))
+    data, _, _ = prepare(read_log(log, use_scan=False), CalibrationOptions().timebase)
+    read = mf.front_of(RobotProfile(latency_s=0.03, wheel_speed_max_mps=cap or 0.3))   # the layer as calibration reads it
+    fit = mf.fit_behind(data, read, "rosmaster_x3", FAST)
+    note = [n for n in fit.notes if "wheel-speed cap" in n]
+    assert len(note) == 1, fit.notes
+    without, with_cap = (float(x) for x in re.findall(r"residual is ([0-9.e+-]+), with it ([0-9.e+-]+)", note[0])[0])
+    assert (fit.front.wheel_speed_max_mps is not None) == kept, note[0]
+    assert fit.cost == pytest.approx(min(without, with_cap), rel=1e-3)
+    assert (without <= with_cap) != kept and fit.evaluations > 0
