@@ -1,6 +1,6 @@
 """Measure how well `bigcbf calibrate --model` (twin/model_fit.py, mujoco.sysid) recovers random hidden robot models.
 
-    .venv/bin/python scripts/twin_model_recovery.py --n 20 --seed 2700 [--duration 60] [--json out.json]
+    .venv/bin/python scripts/twin_model_recovery.py --n 20 --seed 2700 [--duration 60] [--firmware-cap] [--json out.json]
 
 For each of n hidden models drawn at random (:func:`draw_model`: the X3's wheel actuator gain kv x 2^U(-1, 1), wheel
 damping U(0, 0.15) N m s/rad (a steady-state wheel-speed loss of up to about 5 %), floor friction U(0.4, 1.5),
