@@ -8,9 +8,10 @@ change of it moves the model's expected response, against the noise a fit must s
 A hidden X3 (``--hidden``; latency ``--latency``, no other imperfection) drives the calibration program
 (``twin.record.record_calibration``, seed ``--seed``). Its log is binned as ``bigcbf calibrate --model`` bins it
 (``twin.model_fit.problem``, ``--bin`` seconds), behind the command layer calibrated on the same log
-(``twin.model_fit.log_front``, as the fit sees it; ``--exact-front``: the hidden one itself). The simulated Mecanum contact is chaotic in yaw: one rollout is one draw of where each roller meets the
-floor. The model's expected response is the mean of ``--members`` rollouts whose wheels start turned by random
-angles (``twin.model_fit.ensemble_bins``). Per channel (vx, vy, wz, imu wz), the RMS over the bins of:
+(``twin.model_fit.log_front``, as the fit sees it; ``--exact-front``: the hidden one itself). The simulated
+Mecanum contact is chaotic in yaw: one rollout is one draw of where each roller meets the floor. The model's
+expected response is the mean of ``--members`` rollouts whose wheels start turned by random angles
+(``twin.model_fit.ensemble_bins``). Per channel (vx, vy, wz, imu wz), the RMS over the bins of:
 
 - ``log``: the log minus the expected response at the truth: what a fit against this one log sees as noise;
 - ``null``: two expected responses at the truth from independent wheel angles: the ensemble's own sampling noise;
@@ -79,7 +80,8 @@ def measure(hidden: dict, latency_s: float, duration: float, seed: int, members:
     log_noise = rms(pb.measured - truth)
     null = rms(truth - expected(hidden, other))
     independent = max(n_bins * bin_s / opt.block_s, 1.0)
-    out = {"hidden": hidden, "latency_s": latency_s, "front_latency_s": layer.latency_s, "duration_s": duration, "seed": seed, "members": members,
+    out = {"hidden": hidden, "latency_s": latency_s, "front_latency_s": layer.latency_s, "duration_s": duration,
+           "seed": seed, "members": members,
            "bin_s": bin_s, "rel": rel, "bins": n_bins, "channels": pb.channels,
            "log": log_noise.tolist(), "null": null.tolist(), "params": {}}
     for n in names:

@@ -1,6 +1,7 @@
 """Measure how well `bigcbf calibrate --model` (twin/model_fit.py, mujoco.sysid) recovers random hidden robot models.
 
-    .venv/bin/python scripts/twin_model_recovery.py --n 20 --seed 2700 [--duration 60] [--firmware-cap] [--json out.json]
+    .venv/bin/python scripts/twin_model_recovery.py --n 20 --seed 2700 [--duration 60] [--firmware-cap]
+        [--json out.json]
 
 For each of n hidden models drawn at random (:func:`draw_model`: the X3's wheel actuator gain kv x 2^U(-1, 1), wheel
 damping U(0, 0.15) N m s/rad (a steady-state wheel-speed loss of up to about 5 %), floor friction U(0.4, 1.5),
@@ -85,7 +86,8 @@ def run(n: int, seed: int, duration: float, opt: ModelFitOptions = ModelFitOptio
                                                               if p["identified"] else "n.i."))
             cap = (f"cap {row['cap_true_mps'] or 0:.2f}->{row['cap_front_mps'] or 0:.2f}  "
                    if row["cap_true_mps"] or row["cap_front_mps"] or row["cap_note"] else "")
-            print(f"{i:3d} latency {row['latency_true_s']:.3f}->{row['latency_front_s']:.3f} s  {cap}" + "  ".join(cells)
+            head = f"{i:3d} latency {row['latency_true_s']:.3f}->{row['latency_front_s']:.3f} s  {cap}"
+            print(head + "  ".join(cells)
                   + f"  {row['cpu_s_per_log_minute']:.0f} s CPU/log-min", flush=True)
             if json_path is not None:
                 json_path.write_text(json.dumps({"rows": rows, "summary": summary(rows)}, indent=1))

@@ -247,7 +247,8 @@ def test_the_log_chooses_what_caps_the_wheels(tmp_path, hidden, cap, kept):
     log = tmp_path / "h.mcap"
     record_calibration(front, log, seed=5, duration_s=10.0, robot=str(d))
     data, _, _ = prepare(read_log(log, use_scan=False), CalibrationOptions().timebase)
-    read = mf.front_of(RobotProfile(latency_s=0.03, wheel_speed_max_mps=cap or 0.3))   # the layer as calibration reads it
+    # the layer as the calibration reads it: a cap either way
+    read = mf.front_of(RobotProfile(latency_s=0.03, wheel_speed_max_mps=cap or 0.3))
     fit = mf.fit_behind(data, read, "rosmaster_x3", FAST)
     note = [n for n in fit.notes if "wheel-speed cap" in n]
     assert len(note) == 1, fit.notes
