@@ -465,11 +465,8 @@ class RouteLayer:
         pts = ahead[s <= self.params.stall_ahead_m]
         reach = max(self.r_robot_m, 0.5 * g.res)
         out = np.zeros(g.shape, bool)
-        origin = np.array([g.x0, g.y0])
-        lo = np.clip(np.floor((pts.min(axis=0) - reach - origin) / g.res).astype(int), 0, [g.nx, g.ny])
-        hi = np.clip(np.floor((pts.max(axis=0) + reach - origin) / g.res).astype(int) + 1, 0, [g.nx, g.ny])
-        if (hi <= lo).any():
-            return out
+        lo = g.cell(pts.min(axis=0) - reach)           # the cells that can lie within reach, clipped onto the grid
+        hi = np.add(g.cell(pts.max(axis=0) + reach), 1)
         cx = g.x0 + (np.arange(lo[0], hi[0]) + 0.5) * g.res
         cy = g.y0 + (np.arange(lo[1], hi[1]) + 0.5) * g.res
         d2 = ((cx[:, None, None] - pts[None, None, :, 0]) ** 2
