@@ -166,13 +166,16 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
                  suite: str = "paper", seeds: int | Iterable[int] | None = None, workers: int | None = None,
                  engine: str = "local", ray_address: str | None = None, config: str | Path | RunConfig | None = None,
                  profile: str | Path | None = None, perception: str = "lidar", split: str | None = None,
-                 notes: Callable[[str], None] | None = None, variants: Sequence[str] | None = None):
+                 notes: Callable[[str], None] | None = None, variants: Sequence[str] | None = None,
+                 world_seeds: Iterable[int] | None = None):
     """The :class:`bigcbf.bench.runner.BenchConfig` that :func:`run_bench` runs (what ``bigcbf bench`` builds from
     its options). ``seeds``: a count N (seeds 0..N-1) or the seeds themselves; default the suite's count.
     ``methods``: default every registered method. ``scenarios``: default the suite's (``split``: only that split
     of a suite that has splits, e.g. generated's dev or test). The run configuration is the suite's stack
     parameters (if it has them), then ``config``, then ``profile`` (see :func:`load_config`). ``variants``: texts
     ``NAME=V1,V2`` (``bigcbf bench --variant``, :mod:`bigcbf.bench.variants`): every method under every combination.
+    ``world_seeds`` (a suite with fresh worlds, e.g. generated): its worlds at these world seeds instead of its
+    splits' (split label ``fresh``; seeds of a registered split are refused), 1 to 10000 of them.
 
     Checked as ``bigcbf bench`` checks its options, before anything is written: ``seeds`` a count in [1, 10000]
     or 1 to 10000 seeds in [0, 4294967295]; ``methods`` and ``scenarios`` non-empty lists (None: the default);
@@ -224,11 +227,24 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
             raise UserError(f"suite {suite!r} has no split {split!r}; known: {', '.join(s.splits)}")
         if scenario_list:
             raise UserError("--split selects among the suite's scenarios; drop it when giving --scenarios")
+    if world_seeds is not None:
+        if s.fresh is None:
+            raise UserError(f"suite {suite!r} has no worlds drawn by seed (--world-seeds is for suites such as "
+                            "generated)", field="world_seeds")
+        if split is not None or scenario_list:
+            raise UserError("--world-seeds draws the suite's worlds at other seeds; drop --split and --scenarios",
+                            field="world_seeds")
+        world_seeds = check_seeds(world_seeds, "world_seeds")
+        from .worlds import check_fresh_seeds
+        check_fresh_seeds(world_seeds)
     base = RunConfig(stack=s.params()) if s.params is not None else None
     cfg = load_config(config, profile, base=base, notes=notes)
     from .bench.runner import check_bench_out
     check_bench_out(out)              # before the suite writes its worlds there: a user's folder stays untouched
-    entries = s.entries(out, split) if s.splits else s.entries(out)     # (a suite may write its scenario files)
+    if world_seeds is not None:
+        entries = s.fresh(out, world_seeds)
+    else:
+        entries = s.entries(out, split) if s.splits else s.entries(out)     # (a suite may write its scenario files)
     if scenario_list:
         # scenarios given by path that are files of the suite keep their split and family in the reports
         known = {Path(e.scenario).resolve(): e for e in entries if e.split or e.family}

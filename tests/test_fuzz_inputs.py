@@ -418,7 +418,7 @@ CLI = {
                    "--seeds": "num", "--seed-list": "num", "--workers": "num", "--engine": "word",
                    "--ray-address": "word", "--config": "file", "--profile": "file", "--perception": "word",
                    "--report-only": None, "--docs": "file", "--progress": "word", "--route": "word",
-                   "--variant": "word"}),
+                   "--variant": "word", "--world-seeds": "num"}),
     "sim": (["scenario"], {"--ros2": None, "--domain-id": "num", "--loopback": None, "--lockstep": None,
                            "--seed": "num", "--config": "file", "--robot-profile": "file", "--time-limit": "num",
                            "--speed": "num", "--cmd-timeout": "num", "--wait": "num", "--json": None}),

@@ -49,6 +49,9 @@ class Suite:
     #: the folder of the bench's --out where ``entries`` writes the suite's scenario files ("" when it writes none):
     #: a bench --out holding only such files is still a fresh bench's (bigcbf.bench.runner.check_bench_out)
     folder: str = ""
+    #: the suite's scenarios at world seeds the bench is given instead of its splits' (``bigcbf bench
+    #: --world-seeds``), given the output directory and the seeds; None for a suite whose scenarios are fixed
+    fresh: Callable[..., list[SuiteEntry]] | None = None
 
     @property
     def splits(self) -> tuple[str, ...]:
@@ -77,10 +80,14 @@ def _generated(out: Path, split: str | None = None) -> list[SuiteEntry]:
             for path, sp, family in worlds.suite_worlds(out, None if split is None else [split])]
 
 
+def _generated_fresh(out: Path, seeds) -> list[SuiteEntry]:
+    return [SuiteEntry(str(path), sp, family) for path, sp, family in worlds.fresh_worlds(out, seeds)]
+
+
 SUITES.add(Suite(
     "generated", "procedural worlds (bigcbf/worlds/, one module per family): every registered family at the seeds of "
-    "each of its splits, written to DIR/worlds/<split>/, one seed each", _generated, default_seeds=1,
-    split_names=worlds.split_names, folder="worlds"))
+    "each of its splits, written to DIR/worlds/<split>/, one seed each (--world-seeds: at other seeds, split "
+    "fresh)", _generated, default_seeds=1, split_names=worlds.split_names, folder="worlds", fresh=_generated_fresh))
 
 
 def _hardware(out: Path) -> list[SuiteEntry]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 from .argtypes import path_arg
 
@@ -46,6 +47,10 @@ def add_arguments(p):
                        help="seeds 0..N-1, the same for every method (default: the suite's, 50 for paper; at most "
                             "10000)")
     seeds.add_argument("--seed-list", nargs="+", default=None, metavar="SEED", help="these seeds instead")
+    p.add_argument("--world-seeds", nargs="+", default=None, metavar="A-B",
+                   help="generated suite: every family's worlds at these world seeds (A-B inclusive, or single "
+                        "seeds) instead of its splits', written to DIR/worlds/fresh/ and reported as split fresh: "
+                        "worlds nobody tuned on (seeds of the dev and test splits are refused)")
     p.add_argument("--workers", default=None, metavar="K",
                    help="parallel episodes (default: one per core; with --engine ray: the cluster's CPUs)")
     p.add_argument("--engine", default="local", metavar="{local,ray}",
@@ -98,6 +103,29 @@ def _int(value: str, option: str, minimum: int, maximum: int | None = None) -> i
     return v
 
 
+def world_seeds_arg(tokens) -> list[int] | None:
+    """``--world-seeds``' seeds: each token a seed N or a range A-B (inclusive, A <= B); at most MAX_SEEDS in all,
+    each in [0, MAX_SEED]; a mistake is a UserError naming the option."""
+    from ..errors import UserError
+    from .argtypes import MAX_SEED
+
+    if tokens is None:
+        return None
+    seeds: dict[int, None] = {}          # (in the order given, each once)
+    for tok in tokens:
+        m = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", str(tok))
+        if m is None:
+            raise UserError(f"--world-seeds expects seeds N or ranges A-B, got {str(tok)[:40]!r}")
+        lo = _int(m.group(1), "--world-seeds", 0, MAX_SEED)
+        hi = _int(m.group(2), "--world-seeds", 0, MAX_SEED) if m.group(2) is not None else lo
+        if hi < lo:
+            raise UserError(f"--world-seeds: the range {lo}-{hi} ends before it starts")
+        if len(seeds) + hi - lo + 1 > MAX_SEEDS:
+            raise UserError(f"--world-seeds: at most {MAX_SEEDS} world seeds in one bench")
+        seeds.update(dict.fromkeys(range(lo, hi + 1)))
+    return list(seeds)
+
+
 def config_from_args(args):
     """A BenchConfig from parsed arguments (through :func:`bigcbf.api.bench_config`); every mistake is a UserError
     (one line, exit 2)."""
@@ -126,7 +154,7 @@ def config_from_args(args):
     bc = bench_config(args.out, methods=args.methods, scenarios=args.scenarios, suite=args.suite, seeds=seeds,
                       workers=workers, engine=args.engine, ray_address=args.ray_address, config=args.config,
                       profile=args.profile, perception=args.perception, split=args.split,
-                      notes=config_note, variants=args.variant)
+                      notes=config_note, variants=args.variant, world_seeds=world_seeds_arg(args.world_seeds))
     return replace(bc, config=with_route(bc.config, args.route))
 
 

@@ -189,15 +189,48 @@ def suite_worlds(out: Path, splits=None) -> list[tuple[Path, str, str]]:
     """Write the generated suite's worlds into ``out/worlds/<split>/`` (only files whose text changed) and
     return (path, split, family) in an interleaved order (seed by seed, every family that has the split), so that
     a bench that is stopped part-way has covered all families evenly."""
-    out = Path(out)
     entries = []
     for split in (splits or split_names()):
-        seeds = {name: list(fam.splits.get(split, ())) for name, fam in FAMILIES.items()}
-        for k in range(max(map(len, seeds.values()), default=0)):
-            for fam in FAMILIES:
-                if k < len(seeds[fam]):
-                    w = generate(fam, seeds[fam][k])
-                    p = out / "worlds" / split / f"{w.name}.toml"
-                    write(w, p)
-                    entries.append((p, split, fam))
+        entries += _write_interleaved(out, split, {name: list(fam.splits.get(split, ()))
+                                                   for name, fam in FAMILIES.items()})
     return entries
+
+
+def _write_interleaved(out: Path, split: str, seeds: dict[str, list[int]]) -> list[tuple[Path, str, str]]:
+    """Write each family's worlds at its seeds into ``out/worlds/<split>/``, seed by seed across the families."""
+    out = Path(out)
+    entries = []
+    for k in range(max(map(len, seeds.values()), default=0)):
+        for fam in FAMILIES:
+            if k < len(seeds[fam]):
+                w = generate(fam, seeds[fam][k])
+                p = out / "worlds" / split / f"{w.name}.toml"
+                write(w, p)
+                entries.append((p, split, fam))
+    return entries
+
+
+#: The split label of worlds drawn at seeds a bench is given (``bigcbf bench --world-seeds``): seeds of no family's
+#: splits, so worlds nobody tuned on or reported before.
+FRESH = "fresh"
+
+
+def check_fresh_seeds(seeds) -> None:
+    """Refuse world seeds that are seeds of a registered family's split (a UserError naming the first one): fresh
+    worlds are the ones nobody tuned on or looked at; the splits' worlds are run with ``--split``."""
+    taken = set(seeds)
+    for name, fam in FAMILIES.items():
+        for split, rng in fam.splits.items():
+            hit = sorted(taken.intersection(rng))
+            if hit:
+                raise UserError(f"world seed {hit[0]} is a seed of the {split} split of the family {name} (seeds "
+                                f"{rng.start}-{rng.stop - 1}); fresh worlds need other seeds, or run that split "
+                                f"with --split {split}", field="world_seeds")
+
+
+def fresh_worlds(out: Path, seeds) -> list[tuple[Path, str, str]]:
+    """Every registered family's worlds at ``seeds`` (checked by :func:`check_fresh_seeds`), written into
+    ``out/worlds/fresh/`` as :func:`suite_worlds` writes a split's, with the split label :data:`FRESH`."""
+    seeds = list(seeds)
+    check_fresh_seeds(seeds)
+    return _write_interleaved(out, FRESH, {name: seeds for name in FAMILIES})

@@ -67,6 +67,48 @@ def test_split_mistakes_are_one_line(extra, message, tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_generated_suite_at_fresh_world_seeds(tmp_path, small_splits):
+    """--world-seeds: every family at those seeds, split fresh, seed by seed across families, in the order given."""
+    out = tmp_path / "o"
+    config = config_from_args(build_parser().parse_args(["bench", "--out", str(out), "--suite", "generated",
+                                                         "--world-seeds", "2001-2002", "7", "2001"]))
+    assert len(config.scenarios) == len(FAMILIES) * 3 and {sp for _, sp, _ in config.labels} == {"fresh"}
+    assert [fam for _, _, fam in config.labels[:len(FAMILIES)]] == list(FAMILIES)
+    names = [p.rsplit("/", 1)[1] for p, _, fam in config.labels if fam == "posts"]
+    assert names == ["posts_02001.toml", "posts_02002.toml", "posts_00007.toml"]
+    assert (out / "worlds" / "fresh" / "room_02002.toml").read_text() == worlds.generate("room", 2002).toml
+    assert not (out / "worlds" / "dev").exists() and not (out / "worlds" / "test").exists()
+    # the Python API takes the seeds themselves
+    from bigcbf.api import bench_config
+    api = bench_config(tmp_path / "a", suite="generated", world_seeds=range(3000, 3001), methods=["cbf-only"])
+    assert [fam for _, _, fam in api.labels] == list(FAMILIES) and {sp for _, sp, _ in api.labels} == {"fresh"}
+    from bigcbf.errors import UserError
+    for bad, message in [("2000", "expected a count of seeds or a list of seeds"), ([2000, -1], "-1"),
+                         ([2000, 1000], "world seed 1000 is a seed of the test split")]:
+        with pytest.raises(UserError, match=message) as err:
+            bench_config(tmp_path / "c", suite="generated", world_seeds=bad)
+        assert err.value.field == "world_seeds"
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--suite", "generated", "--world-seeds", "1"], "world seed 1 is a seed of the dev split of the family"),
+    (["--suite", "generated", "--world-seeds", "990-1000"], "world seed 1000 is a seed of the test split"),
+    (["--suite", "generated", "--world-seeds", "2010-2000"], "the range 2010-2000 ends before it starts"),
+    (["--suite", "generated", "--world-seeds", "20x"], "--world-seeds expects seeds N or ranges A-B, got '20x'"),
+    (["--suite", "generated", "--world-seeds", "-3"], "--world-seeds expects seeds N or ranges A-B, got '-3'"),
+    (["--suite", "generated", "--world-seeds", "99999999999"], "--world-seeds must be <= 4294967295"),
+    (["--suite", "generated", "--world-seeds", "0-20000"], "at most 10000 world seeds"),
+    (["--suite", "generated", "--world-seeds", "2000", "--split", "dev"], "drop --split and --scenarios"),
+    (["--suite", "paper", "--world-seeds", "2000"], "suite 'paper' has no worlds drawn by seed"),
+])
+def test_world_seed_mistakes_are_one_line(extra, message, tmp_path, capsys, small_splits):
+    assert main(["bench", "--out", str(tmp_path / "o"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o").exists()
+
+
 def _row(scenario, method, success, collision=False, **kw):
     m = dict(success=success, collision=collision, timeout=not (success or collision), time_s=10.0,
              min_clearance_m=0.5, e_cbf=0.0, cbf_active_ratio=0.0, qp_infeasible_ratio=0.0, planner_p95_ms=0.0,
