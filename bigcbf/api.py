@@ -234,9 +234,7 @@ def bench_config(out: str | Path, *, methods: Sequence[str] | None = None, scena
         if split is not None or scenario_list:
             raise UserError("--world-seeds draws the suite's worlds at other seeds; drop --split and --scenarios",
                             field="world_seeds")
-        world_seeds = check_seeds(world_seeds, "world_seeds")
-        from .worlds import check_fresh_seeds
-        check_fresh_seeds(world_seeds)
+        world_seeds = check_seeds(world_seeds, "world_seeds")     # (s.fresh refuses split seeds before it writes)
     base = RunConfig(stack=s.params()) if s.params is not None else None
     cfg = load_config(config, profile, base=base, notes=notes)
     from .bench.runner import check_bench_out

@@ -42,7 +42,8 @@ def discover() -> list[str]:
 discover()
 
 __all__ = ["FAMILIES", "FRESH", "GENERATOR_VERSION", "MAX_ATTEMPTS", "SPLITS", "Family", "World", "check_fresh_seeds",
-           "family", "fresh_worlds", "generate", "parse", "split_names", "suite_worlds", "toml_key", "toml_value", "world_name", "write", "CLEARANCE_M",
+           "family", "fresh_worlds", "generate", "parse", "split_names", "suite_worlds", "toml_key", "toml_value",
+           "world_name", "write", "CLEARANCE_M",
            "FOOTPRINT_M", "GRID_ALLOWANCE_M", "GRID_M", "MIN_PASSAGE_M", "NONTRIVIAL_M", "PED_RADIUS_M",
            "PED_ROUTE_M", "PED_START_GAP_M", "PED_WALL_CLEARANCE_M", "PLAN_SPEED_MPS", "ROBOT_RADIUS_M",
            "SLACK_PER_PEDESTRIAN_S", "SLACK_S", "CheckResult", "Draft", "Grid", "check", "connected", "distance",
